@@ -1,0 +1,27 @@
+# The two commands of the README:
+#   make demo   set up, build, and run the main job on the embedded exemplar
+#   make test   set up, build, and run the whole test suite
+# Everything else is a helper. CUDA=1 builds the GPU variant.
+
+CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
+OUT ?= out/demo
+
+.PHONY: setup build demo test bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+build: setup
+	cargo build --release $(CARGO_FEATURES)
+
+demo: build
+	./target/release/shapeshifter demo -o $(OUT)
+
+test: setup
+	cargo test --release $(CARGO_FEATURES) -- --test-threads=2
+
+bench: build
+	cargo run --release --example encode_bench
+
+clean:
+	cargo clean

@@ -1,0 +1,46 @@
+//! Builds the one cxx bridge and its C++ shims, and gives the binary an rpath
+//! to libtorch. Reruns only when the bridge or the C++ changes, so Rust edits
+//! never recompile the (slow) OpenVDB/CGAL translation units.
+
+use std::path::Path;
+
+const CPP_FILES: &[&str] = &["cpp/mesh_io.cpp", "cpp/vdb_io.cpp", "cpp/vdb_points.cpp"];
+
+fn main() {
+    let mut build = cxx_build::bridge("src/ffi.rs");
+    build
+        .files(CPP_FILES)
+        .std("c++17")
+        // Always optimise the C++: OpenVDB/CGAL code is many times slower at -O0,
+        // and ccache keeps the cost to the first build.
+        .opt_level(2)
+        .include("/usr/include/eigen3")
+        .define("CGAL_EIGEN3_ENABLED", None)
+        .define("CGAL_LINKED_WITH_TBB", None)
+        .flag_if_supported("-Wno-deprecated-declarations")
+        .flag_if_supported("-Wno-unused-parameter");
+    build.compile("shapeshifter_cpp");
+
+    for lib in ["openvdb", "tbb", "Imath-3_1", "OpenMeshCore", "mpfr", "gmp", "blosc"] {
+        println!("cargo:rustc-link-lib={lib}");
+    }
+    println!("cargo:rerun-if-changed=src/ffi.rs");
+    println!("cargo:rerun-if-changed=cpp");
+    for f in CPP_FILES {
+        println!("cargo:rerun-if-changed={f}");
+    }
+
+    // libtorch's lib folder, from torch-sys (links = "tch"), else $LIBTORCH/lib.
+    let torch_lib = std::env::var("DEP_TCH_LIBTORCH_LIB").ok().or_else(|| {
+        std::env::var("LIBTORCH").ok().map(|d| format!("{d}/lib"))
+    });
+    if let Some(dir) = torch_lib {
+        let dir = Path::new(&dir).canonicalize().unwrap_or_else(|_| dir.clone().into());
+        println!("cargo:rustc-link-arg=-Wl,-rpath,{}", dir.display());
+    }
+    if std::env::var("CARGO_FEATURE_CUDA").is_ok() {
+        // rustc links with --as-needed, which would drop libtorch_cuda.
+        println!("cargo:rustc-link-arg=-Wl,--push-state,--no-as-needed,-ltorch_cuda,--pop-state");
+    }
+    println!("cargo:rerun-if-env-changed=LIBTORCH");
+}

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# One idempotent set-up for a fresh Debian 12 machine: Debian packages
+# (OpenVDB 10, OpenMesh 9, CGAL 5.5, ccache, ...) and libtorch 2.13.0 for
+# tch 0.26 from the PyPI torch wheel, cached OUTSIDE the work tree so that
+# clones and CI reuse it. A second run with everything present downloads
+# nothing and takes about a second.
+#   CUDA=1 scripts/setup.sh   installs the full CUDA torch wheel instead.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PACKAGES=(libopenvdb-dev libopenvdb-tools python3-openvdb libopenmesh-dev libcgal-dev
+  libeigen3-dev libgmp-dev libmpfr-dev libtbb-dev libblosc-dev ccache pkg-config
+  python3-venv)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "setup: installing Debian packages: ${missing[*]}" >&2
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
+  $SUDO apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q "${missing[@]}"
+fi
+
+CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
+if [ "${CUDA:-0}" = 1 ]; then VENV="$CACHE/torch-cuda-venv"; else VENV="$CACHE/torch-venv"; fi
+TORCH="$VENV/lib/python3.11/site-packages/torch"
+if [ ! -f "$VENV/.complete" ]; then
+  echo "setup: installing libtorch 2.13.0 into $VENV" >&2
+  rm -rf "$VENV"
+  /usr/bin/python3 -m venv "$VENV" 2>/dev/null || python3 -m venv "$VENV"
+  if [ "${CUDA:-0}" = 1 ]; then
+    "$VENV/bin/pip" install -q torch==2.13.0
+  else
+    # libtorch_cpu.so itself needs libcudart.so.13 and libcupti.so.13: two small wheels.
+    "$VENV/bin/pip" install -q --no-deps torch==2.13.0 "nvidia-cuda-runtime==13.0.96.*" \
+      "nvidia-cuda-cupti==13.0.85.*"
+  fi
+  touch "$VENV/.complete"
+fi
+TORCH_PY_DIR=$(ls -d "$VENV"/lib/python3*/site-packages/torch | head -n1)
+ln -sfn "$TORCH_PY_DIR" .libtorch
+echo "setup: ready (libtorch at $(readlink .libtorch))" >&2

@@ -1,0 +1,26 @@
+//! shapeshifter: 3D shape variations from a single exemplar mesh
+//! (ShapeShifter, CVPR 2025), with every level of its sparse multiscale grids
+//! exchanged as OpenVDB files.
+//!
+//! Data flows one way: [`mesh`] -> `encode` -> [`level`] -> train -> sample ->
+//! mesh / [`vdb`]. Only [`vdb`] and [`mesh`] (and `recon`) talk to C++.
+
+pub mod error;
+mod ffi;
+pub mod info;
+pub mod level;
+pub mod mesh;
+pub mod vdb;
+
+pub use error::{Error, Result};
+
+/// Tunes glibc's allocator for large tensors: by default it returns every big
+/// block to the OS, which made sparse convolution 1.5-3x slower on CPU
+/// (DESIGN.md). Call once at start-up.
+pub fn tune_allocator() {
+    // SAFETY: mallopt only changes allocator thresholds.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 30);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30);
+    }
+}
