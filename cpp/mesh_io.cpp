@@ -5,6 +5,7 @@
 // the polygon mesh into fan triangles. Errors are thrown as std::runtime_error
 // and reach Rust as `Err` through the cxx Result.
 #include "shapeshifter/cpp/mesh_io.h"
+#include "shapeshifter/src/ffi.rs.h"
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
@@ -20,7 +21,17 @@ struct Traits : public OpenMesh::DefaultTraits {
   typedef OpenMesh::Vec3f Color;
 };
 using PolyMesh = OpenMesh::PolyMesh_ArrayKernelT<Traits>;
-using TriMesh = OpenMesh::TriMesh_ArrayKernelT<Traits>;
+// Written meshes keep 8-bit colours: OpenMesh's PLY exporter only converts
+// byte colours (a float colour type fails to compile in its colour cast).
+struct WriteTraits : public OpenMesh::DefaultTraits {
+  typedef OpenMesh::Vec3uc Color;
+};
+using TriMesh = OpenMesh::TriMesh_ArrayKernelT<WriteTraits>;
+
+unsigned char to_byte(float c) {
+  const float v = c < 0.f ? 0.f : (c > 1.f ? 1.f : c);
+  return static_cast<unsigned char>(v * 255.f + 0.5f);
+}
 
 // OpenMesh reports problems on its own streams; we report them ourselves.
 void silence_openmesh() {
@@ -109,9 +120,9 @@ void write_mesh(rust::Str path, const MeshData &data, bool binary) {
     handles[i] = mesh.add_vertex(TriMesh::Point(
         data.positions[3 * i], data.positions[3 * i + 1], data.positions[3 * i + 2]));
     if (vcol)
-      mesh.set_color(handles[i], TriMesh::Color(data.vertex_colours[3 * i],
-                                                data.vertex_colours[3 * i + 1],
-                                                data.vertex_colours[3 * i + 2]));
+      mesh.set_color(handles[i], TriMesh::Color(to_byte(data.vertex_colours[3 * i]),
+                                                to_byte(data.vertex_colours[3 * i + 1]),
+                                                to_byte(data.vertex_colours[3 * i + 2])));
   }
   for (size_t t = 0; t + 2 < data.triangles.size(); t += 3) {
     // add_face refuses non-manifold configurations; such triangles keep

@@ -1,9 +1,11 @@
 // @brief Mesh reading and writing through OpenMesh (OBJ+MTL, PLY, OFF, STL).
 #pragma once
 #include "rust/cxx.h"
-#include "shapeshifter/src/ffi.rs.h"
 
+// The bridge header includes this one before it defines the shared structs:
+// declare them here, the .cpp files include the full definitions.
 namespace shapeshifter {
+struct MeshData;
 MeshData read_mesh(rust::Str path);
 void write_mesh(rust::Str path, const MeshData &mesh, bool binary);
 }

@@ -6,6 +6,7 @@
 // takes the topology from `mask` and the features from P/N/Cd at the same
 // voxels, so a level file edited in a DCC tool comes back voxel for voxel.
 #include "shapeshifter/cpp/vdb_io.h"
+#include "shapeshifter/src/ffi.rs.h"
 #include "shapeshifter/cpp/vdb_common.h"
 
 #include <openvdb/io/File.h>

@@ -1,9 +1,12 @@
 // @brief Level files: one .vdb per level with the grids DESIGN.md lists.
 #pragma once
 #include "rust/cxx.h"
-#include "shapeshifter/src/ffi.rs.h"
 
+// The bridge header includes this one before it defines the shared structs:
+// declare them here, the .cpp files include the full definitions.
 namespace shapeshifter {
+struct LevelData;
+struct GridSummary;
 void write_level_file(rust::Str path, const LevelData &level, bool half_floats);
 LevelData read_level_file(rust::Str path);
 rust::Vec<GridSummary> summarise_vdb_file(rust::Str path);

@@ -6,6 +6,7 @@
 //! mesh / [`vdb`]. Only [`vdb`] and [`mesh`] (and `recon`) talk to C++.
 
 pub mod error;
+pub mod exemplar;
 mod ffi;
 pub mod info;
 pub mod level;

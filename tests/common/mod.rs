@@ -1,0 +1,54 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// `../shared/data` beside the project, if present. Tests that need it skip
+/// with a message where it is absent (a user's fresh checkout has none).
+pub fn shared_data(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipping: {} is absent (../shared/data is not beside this checkout)", p.display());
+        None
+    }
+}
+
+/// Runs the real binary with `args`.
+pub fn shapeshifter(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_shapeshifter"))
+        .args(args)
+        .output()
+        .expect("binary runs")
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Asserts that a run failed with ONE error line that names `file` and
+/// contains `problem`, and did not panic.
+pub fn assert_clean_failure(o: &Output, file: &str, problem: &str) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "expected failure, got success; stderr: {err}");
+    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
+    assert!(o.status.code().is_some(), "killed by a signal (C++ exception?): {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(lines.len(), 1, "expected one error line, got: {err}");
+    assert!(lines[0].contains(file), "error does not name {file}: {}", lines[0]);
+    assert!(lines[0].to_lowercase().contains(&problem.to_lowercase()), "error does not say '{problem}': {}", lines[0]);
+}
+
+/// Files in `dir` (names), sorted, to check nothing half-written is left.
+pub fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .map(|r| r.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+        .unwrap_or_default();
+    v.sort();
+    v
+}
