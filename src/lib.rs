@@ -5,6 +5,8 @@
 //! Data flows one way: [`mesh`] -> `encode` -> [`level`] -> train -> sample ->
 //! mesh / [`vdb`]. Only [`vdb`] and [`mesh`] (and `recon`) talk to C++.
 
+pub mod config;
+pub mod diffusion;
 pub mod error;
 pub mod exemplar;
 mod ffi;

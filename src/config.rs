@@ -1,0 +1,288 @@
+//! Configuration: profiles shipped with the program (`profiles/*.toml`,
+//! embedded at build time), overridden by `--set section.key=value`, and
+//! recorded with a digest in every output so that results can be traced and
+//! finished stages reused.
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::error::{Error, Result};
+
+/// Profiles that ship with the program: (name, TOML text).
+pub const PROFILES: &[(&str, &str)] = &[
+    ("cpu", include_str!("../profiles/cpu.toml")),
+    ("paper", include_str!("../profiles/paper.toml")),
+];
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    pub name: String,
+    pub encode: EncodeConfig,
+    pub model: ModelConfig,
+    pub train: TrainConfig,
+    pub sample: SampleConfig,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EncodeConfig {
+    /// Voxels per axis of the finest sampling grid.
+    pub sampling_resolution: u32,
+    /// Resolution of level 0.
+    pub coarsest_resolution: u32,
+    /// Resolution of the last level.
+    pub finest_resolution: u32,
+    /// "qem" or "average".
+    pub pooling: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    pub channels: i64,
+    pub upsampler_channels: i64,
+    pub level0_layers: usize,
+    pub level0_first_kernel: usize,
+    pub level0_head_layers: usize,
+    pub upper_layers: usize,
+    pub upper_first_kernel: usize,
+    pub upper_head_layers: usize,
+    pub dropout: f64,
+    pub upsampler_dropout: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    pub level0_iterations: usize,
+    pub level0_batch: usize,
+    pub upper_iterations: usize,
+    pub upper_batch: usize,
+    /// Crop edge in voxels for levels >= 1.
+    pub crop: i32,
+    pub upsampler_iterations: usize,
+    pub lr: f64,
+    pub upsampler_lr: f64,
+    pub grad_clip: f64,
+    /// Levels >= 1 use t in [0, upper_t_max].
+    pub upper_t_max: f64,
+    /// "code" or "paper".
+    pub mixing: String,
+    pub checkpoint_minutes: f64,
+    pub seed: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SampleConfig {
+    /// "ddpm" or "ddim".
+    pub sampler: String,
+    pub level0_steps: usize,
+    pub upper_steps: usize,
+}
+
+impl Config {
+    /// A shipped profile by name, or a TOML file by path, with overrides.
+    pub fn load(profile: &str, overrides: &[String]) -> Result<Config> {
+        let text = match PROFILES.iter().find(|(n, _)| *n == profile) {
+            Some((_, t)) => t.to_string(),
+            None => {
+                let p = std::path::Path::new(profile);
+                if !p.exists() {
+                    let names: Vec<&str> = PROFILES.iter().map(|(n, _)| *n).collect();
+                    return Err(Error::Invalid(format!(
+                        "unknown profile '{profile}' (shipped: {}; or give a .toml file)",
+                        names.join(", ")
+                    )));
+                }
+                std::fs::read_to_string(p).map_err(|e| Error::file(p, e.to_string()))?
+            }
+        };
+        let mut table: toml::Table =
+            toml::from_str(&text).map_err(|e| Error::Invalid(format!("profile '{profile}': {}", one_line(&e))))?;
+        for o in overrides {
+            apply_override(&mut table, o)?;
+        }
+        let config: Config = toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| Error::Invalid(format!("configuration: {}", one_line(&e))))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Reads a configuration recorded in an output folder.
+    pub fn read(path: &std::path::Path) -> Result<Config> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+        let c: Config = toml::from_str(&text).map_err(|e| Error::file(path, one_line(&e)))?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("config serialises")
+    }
+
+    /// Short digest of the whole configuration (hex, 16 chars).
+    pub fn digest(&self) -> String {
+        digest_str(&self.to_toml())
+    }
+
+    /// Digest of what one stage depends on, so changing the sampler does not
+    /// invalidate trained models, and so on.
+    pub fn stage_digest(&self, stage: &str) -> String {
+        let part = match stage {
+            "encode" => toml::to_string(&self.encode),
+            "train" => [toml::to_string(&self.encode), toml::to_string(&self.model), toml::to_string(&self.train)]
+                .into_iter()
+                .collect::<Result<Vec<_>, _>>()
+                .map(|v| v.join("\n")),
+            _ => Ok(self.to_toml()),
+        }
+        .expect("config serialises");
+        digest_str(&part)
+    }
+
+    /// Number of levels, from the resolutions.
+    pub fn levels(&self) -> usize {
+        (self.encode.finest_resolution / self.encode.coarsest_resolution).trailing_zeros() as usize + 1
+    }
+
+    fn validate(&self) -> Result<()> {
+        let e = &self.encode;
+        let pow2 = |v: u32| v >= 4 && v.is_power_of_two();
+        if !(pow2(e.sampling_resolution) && pow2(e.coarsest_resolution) && pow2(e.finest_resolution)) {
+            return Err(Error::Invalid("encode resolutions must be powers of two >= 4".into()));
+        }
+        if !(e.coarsest_resolution <= e.finest_resolution && e.finest_resolution <= e.sampling_resolution) {
+            return Err(Error::Invalid(
+                "encode resolutions must satisfy coarsest <= finest <= sampling".into(),
+            ));
+        }
+        if !["qem", "average"].contains(&e.pooling.as_str()) {
+            return Err(Error::Invalid(format!("encode.pooling '{}' is not qem or average", e.pooling)));
+        }
+        if !["ddpm", "ddim"].contains(&self.sample.sampler.as_str()) {
+            return Err(Error::Invalid(format!("sample.sampler '{}' is not ddpm or ddim", self.sample.sampler)));
+        }
+        if !["code", "paper"].contains(&self.train.mixing.as_str()) {
+            return Err(Error::Invalid(format!("train.mixing '{}' is not code or paper", self.train.mixing)));
+        }
+        let m = &self.model;
+        for k in [m.level0_first_kernel, m.upper_first_kernel] {
+            if ![1, 3, 5].contains(&k) {
+                return Err(Error::Invalid(format!("model kernel size {k} must be 1, 3 or 5")));
+            }
+        }
+        if m.channels < 1 || m.upsampler_channels < 1 || m.level0_layers < 1 || m.upper_layers < 1 {
+            return Err(Error::Invalid("model channels and layers must be at least 1".into()));
+        }
+        let t = &self.train;
+        if !(t.upper_t_max > 0.0 && t.upper_t_max <= 1.0) {
+            return Err(Error::Invalid("train.upper_t_max must be in (0, 1]".into()));
+        }
+        if t.crop < 3 || t.level0_batch == 0 || t.upper_batch == 0 {
+            return Err(Error::Invalid("train.crop must be >= 3 and batches >= 1".into()));
+        }
+        if !(t.lr > 0.0 && t.upsampler_lr > 0.0) {
+            return Err(Error::Invalid("learning rates must be positive".into()));
+        }
+        if self.sample.level0_steps == 0 || self.sample.upper_steps == 0 {
+            return Err(Error::Invalid("sample steps must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
+fn digest_str(s: &str) -> String {
+    let d = Sha256::digest(s.as_bytes());
+    d.iter().take(8).map(|b| format!("{b:02x}")).collect()
+}
+
+fn one_line(e: &impl std::fmt::Display) -> String {
+    e.to_string().split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// `section.key=value`, value parsed as TOML (number, bool, string) or taken
+/// as a bare string.
+fn apply_override(table: &mut toml::Table, spec: &str) -> Result<()> {
+    let bad = || Error::Invalid(format!("--set '{spec}': expected section.key=value"));
+    let (path, value) = spec.split_once('=').ok_or_else(bad)?;
+    let (section, key) = path.trim().split_once('.').ok_or_else(bad)?;
+    let value = value.trim();
+    let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(value.to_string()));
+    let sec = table
+        .get_mut(section)
+        .and_then(|s| s.as_table_mut())
+        .ok_or_else(|| Error::Invalid(format!("--set '{spec}': no section '{section}'")))?;
+    let old = sec
+        .get(key)
+        .ok_or_else(|| Error::Invalid(format!("--set '{spec}': no key '{key}' in [{section}]")))?;
+    // Keep the type: an integer key given "3.0" is an error, a float key given "3" is fine.
+    let parsed = match (old, parsed) {
+        (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(i as f64),
+        (o, p) if std::mem::discriminant(o) == std::mem::discriminant(&p) => p,
+        (o, p) => {
+            return Err(Error::Invalid(format!(
+                "--set '{spec}': {section}.{key} is a {}, not a {}",
+                o.type_str(),
+                p.type_str()
+            )))
+        }
+    };
+    sec.insert(key.to_string(), parsed);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_profiles_load() {
+        let paper = Config::load("paper", &[]).unwrap();
+        assert_eq!(paper.levels(), 5);
+        assert_eq!(paper.train.crop, 41);
+        assert_eq!(paper.model.channels, 128);
+        let cpu = Config::load("cpu", &[]).unwrap();
+        assert!(cpu.model.channels < paper.model.channels);
+        assert_ne!(cpu.digest(), paper.digest());
+    }
+
+    #[test]
+    fn overrides_apply_and_are_checked() {
+        let c = Config::load("cpu", &["train.level0_iterations=7".into(), "sample.sampler=ddpm".into()]).unwrap();
+        assert_eq!(c.train.level0_iterations, 7);
+        assert_eq!(c.sample.sampler, "ddpm");
+        let c = Config::load("cpu", &["train.lr=1".into()]).unwrap();
+        assert_eq!(c.train.lr, 1.0);
+        assert!(Config::load("cpu", &["train.nothing=1".into()]).is_err());
+        assert!(Config::load("cpu", &["train.crop=big".into()]).is_err());
+        assert!(Config::load("cpu", &["sample.sampler=euler".into()]).is_err());
+        assert!(Config::load("cpu", &["encode.finest_resolution=100".into()]).is_err());
+        assert!(Config::load("nonexistent", &[]).is_err());
+    }
+
+    #[test]
+    fn stage_digests_ignore_later_stages() {
+        let a = Config::load("cpu", &[]).unwrap();
+        let b = Config::load("cpu", &["sample.upper_steps=99".into()]).unwrap();
+        assert_eq!(a.stage_digest("train"), b.stage_digest("train"));
+        assert_ne!(a.digest(), b.digest());
+        let c = Config::load("cpu", &["train.crop=17".into()]).unwrap();
+        assert_ne!(a.stage_digest("train"), c.stage_digest("train"));
+        assert_eq!(a.stage_digest("encode"), c.stage_digest("encode"));
+    }
+
+    #[test]
+    fn recorded_config_reads_back() {
+        let a = Config::load("paper", &[]).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("config.toml");
+        std::fs::write(&p, a.to_toml()).unwrap();
+        assert_eq!(Config::read(&p).unwrap(), a);
+    }
+}
