@@ -6,7 +6,9 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-use shapeshifter::info;
+use shapeshifter::encode::{self, EncodeOptions, Pooling};
+use shapeshifter::render::{self, RenderOptions};
+use shapeshifter::{dataset, info, mesh, vdb};
 
 #[derive(Parser, Debug)]
 #[command(name = "shapeshifter", version, about = "3D shape variations from one exemplar mesh (ShapeShifter, CVPR 2025)")]
@@ -31,6 +33,87 @@ pub enum Command {
         #[arg(required = true)]
         files: Vec<PathBuf>,
     },
+    /// Encode an exemplar mesh into the multiscale feature grids: one level
+    /// file per level (level_0.vdb coarsest) and manifest.json in DIR.
+    ///
+    /// Example: shapeshifter encode tower.obj -o out/tower --preview
+    Encode {
+        /// The exemplar (.obj with .mtl, .ply, .off, .stl).
+        mesh: PathBuf,
+        /// Output folder (created).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Voxels per axis of the finest sampling grid.
+        #[arg(long, default_value_t = 1024)]
+        sampling_resolution: u32,
+        /// Resolution of level 0.
+        #[arg(long, default_value_t = 16)]
+        coarsest: u32,
+        /// Resolution of the last level.
+        #[arg(long, default_value_t = 256)]
+        finest: u32,
+        /// How children pool into parents.
+        #[arg(long, value_enum, default_value_t = PoolingArg::Qem)]
+        pooling: PoolingArg,
+        /// Also write level_K.png previews.
+        #[arg(long)]
+        preview: bool,
+        #[command(flatten)]
+        view: ViewArgs,
+    },
+    /// Render a level file's oriented coloured points, or a mesh, to a PNG.
+    ///
+    /// Example: shapeshifter render out/tower/level_4.vdb -o level_4.png --azimuth 120
+    Render {
+        /// A level file (.vdb) or a mesh.
+        input: PathBuf,
+        /// The PNG to write.
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        view: ViewArgs,
+    },
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum PoolingArg {
+    /// Quadric error minimisation: keeps corners and creases sharp.
+    Qem,
+    /// Plain averaging of points (rounds corners; for comparison).
+    Average,
+}
+
+/// How previews look.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// Image width, pixels.
+    #[arg(long, default_value_t = 800)]
+    pub width: u32,
+    /// Image height, pixels.
+    #[arg(long, default_value_t = 800)]
+    pub height: u32,
+    /// Camera angle around the vertical axis, degrees.
+    #[arg(long, default_value_t = 35.0, allow_hyphen_values = true)]
+    pub azimuth: f32,
+    /// Camera angle above the horizon, degrees.
+    #[arg(long, default_value_t = 25.0, allow_hyphen_values = true)]
+    pub elevation: f32,
+    /// Splat radius in voxel sizes.
+    #[arg(long, default_value_t = 0.9)]
+    pub point_size: f32,
+}
+
+impl ViewArgs {
+    pub fn options(&self) -> RenderOptions {
+        RenderOptions {
+            width: self.width,
+            height: self.height,
+            azimuth_deg: self.azimuth,
+            elevation_deg: self.elevation,
+            point_size: self.point_size,
+            ..Default::default()
+        }
+    }
 }
 
 pub fn init_logging(cli: &Cli) {
@@ -63,6 +146,55 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 }
             }
             Ok(if failed > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+        }
+        Command::Encode { mesh: mesh_path, output, sampling_resolution, coarsest, finest, pooling, preview, view } => {
+            let options = EncodeOptions {
+                sampling_resolution,
+                coarsest_resolution: coarsest,
+                finest_resolution: finest,
+                pooling: match pooling {
+                    PoolingArg::Qem => Pooling::Qem,
+                    PoolingArg::Average => Pooling::Average,
+                },
+                ..Default::default()
+            };
+            options.validate().map_err(shapeshifter::Error::from)?;
+            let mesh = mesh::load(&mesh_path)?;
+            let digest = dataset::file_sha256(&mesh_path)?;
+            let (levels, stats) =
+                encode::encode(&mesh, &options).map_err(|e| anyhow::anyhow!("{}: {e}", mesh_path.display()))?;
+            let previews = preview.then(|| view.options());
+            let manifest = dataset::write(
+                &output,
+                &mesh,
+                &mesh_path.display().to_string(),
+                &digest,
+                &levels,
+                &options,
+                &stats,
+                previews.as_ref(),
+            )?;
+            log::info!(
+                "encoded {} in {:.2} s: {}",
+                mesh_path.display(),
+                stats.total_s,
+                manifest.levels.iter().map(|l| format!("{}^3: {} voxels", l.resolution, l.voxels)).collect::<Vec<_>>().join(", ")
+            );
+            println!("{}", output.join(dataset::MANIFEST).display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Render { input, output, view } => {
+            let opts = view.options();
+            let ext = input.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+            let img = if ext == "vdb" {
+                let (level, _) = vdb::read_level(&input)?;
+                render::render_level(&level, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?
+            } else {
+                let m = mesh::load(&input)?;
+                render::render_mesh(&m, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?
+            };
+            render::save_png(&img, &output)?;
+            Ok(ExitCode::SUCCESS)
         }
     }
 }

@@ -10,6 +10,10 @@ pub enum Error {
     Invalid(String),
     #[error(transparent)]
     Torch(#[from] tch::TchError),
+    #[error(transparent)]
+    Encode(#[from] crate::encode::EncodeError),
+    #[error(transparent)]
+    Render(#[from] crate::render::RenderError),
 }
 
 impl Error {

@@ -6,13 +6,16 @@
 //! mesh / [`vdb`]. Only [`vdb`] and [`mesh`] (and `recon`) talk to C++.
 
 pub mod config;
+pub mod dataset;
 pub mod diffusion;
+pub mod encode;
 pub mod error;
 pub mod exemplar;
 mod ffi;
 pub mod info;
 pub mod level;
 pub mod mesh;
+pub mod render;
 pub mod vdb;
 
 pub use error::{Error, Result};

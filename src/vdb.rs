@@ -23,6 +23,8 @@ pub struct Provenance {
     pub seed: Option<u64>,
     /// Digest of the configuration that made the level ("" for encoding).
     pub config_digest: String,
+    /// The exemplar was an open surface (boundary edges): meshing picks APSS.
+    pub exemplar_open: bool,
 }
 
 /// Options for writing level files.
@@ -66,6 +68,7 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
         },
         meta_num("shapeshifter_scale", "float", level.frame.scale),
         meta_str("shapeshifter_config_digest", &provenance.config_digest),
+        meta_num("shapeshifter_exemplar_open", "int", provenance.exemplar_open as i32 as f64),
     ];
     if let Some(seed) = provenance.seed {
         // Kept as a string: OpenVDB has no unsigned 64-bit metadata.
@@ -146,6 +149,7 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
         exemplar: find(&data.meta, "shapeshifter_exemplar").map(|m| m.text.clone()).unwrap_or_default(),
         seed: find(&data.meta, "shapeshifter_seed").and_then(|m| m.text.parse().ok()),
         config_digest: find(&data.meta, "shapeshifter_config_digest").map(|m| m.text.clone()).unwrap_or_default(),
+        exemplar_open: find(&data.meta, "shapeshifter_exemplar_open").is_some_and(|m| m.number != 0.0),
     };
     Ok((level, provenance))
 }

@@ -1,0 +1,83 @@
+//! Encodes a mesh (default: the ruined tower) several times at the paper's settings
+//! and prints the median time of every stage and the voxel counts.
+//!
+//! Usage: encode_bench [MESH.obj] [RUNS] [qem|average]
+
+use std::path::Path;
+
+use shapeshifter::encode::{encode, EncodeOptions, EncodeStats, Pooling};
+use shapeshifter::mesh;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+fn peak_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).map(|l| l.to_string()))
+        .and_then(|l| l.split_whitespace().nth(1).and_then(|kb| kb.parse::<f64>().ok()))
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// User + system CPU seconds of this process so far (Linux), to read the timings
+/// against when other jobs share the cores.
+fn cpu_seconds() -> f64 {
+    std::fs::read_to_string("/proc/self/stat")
+        .ok()
+        .map(|s| {
+            let after = &s[s.rfind(')').unwrap_or(0) + 2..];
+            after.split_whitespace().skip(11).take(2).filter_map(|x| x.parse::<f64>().ok()).sum::<f64>()
+                / 100.0
+        })
+        .unwrap_or(f64::NAN)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let path = args.get(1).map_or("../shared/data/towerruins/towerruins.obj", |s| s.as_str());
+    let runs: usize = args.get(2).map_or(5, |s| s.parse().expect("RUNS"));
+    let pooling = match args.get(3).map(String::as_str) {
+        Some("average") => Pooling::Average,
+        _ => Pooling::Qem,
+    };
+    let mesh = match mesh::load(Path::new(path)) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::exit(1);
+        }
+    };
+    println!(
+        "{}: {} vertices, {} triangles, {} threads, {pooling:?}",
+        mesh.name,
+        mesh.positions.len(),
+        mesh.triangles.len(),
+        rayon::current_num_threads()
+    );
+    let options = EncodeOptions { pooling, ..Default::default() };
+    let mut all: Vec<EncodeStats> = Vec::new();
+    let cpu_start = cpu_seconds();
+    for _ in 0..runs {
+        let (levels, stats) = encode(&mesh, &options).expect("encode");
+        assert_eq!(levels.len(), 5);
+        all.push(stats);
+    }
+    let cpu_per_run = (cpu_seconds() - cpu_start) / runs as f64;
+    let m = |f: fn(&EncodeStats) -> f64| median(all.iter().map(f).collect());
+    println!("median of {runs} runs (s):");
+    println!("  normalise {:.3}", m(|s| s.normalise_s));
+    println!("  voxelise  {:.3}", m(|s| s.voxelise_s));
+    println!("  sort      {:.3}", m(|s| s.sort_s));
+    println!("  sample    {:.3}", m(|s| s.sample_s));
+    println!("  pool      {:.3}", m(|s| s.pool_s));
+    println!("  output    {:.3}", m(|s| s.output_s));
+    println!("  total     {:.3}   (CPU {cpu_per_run:.2} s per run, mean)", m(|s| s.total_s));
+    let s = &all[0];
+    println!("triangle/voxel pairs {}, sampling voxels {}", s.triangle_voxel_pairs, s.sampling_voxels);
+    for (r, n) in &s.voxels_per_resolution {
+        println!("  {r:5}: {n}");
+    }
+    println!("peak RSS {:.0} MiB", peak_rss_mib());
+}
