@@ -115,12 +115,15 @@ impl Builder {
 /// over their top courses.
 fn in_opening(a: f32, course: u32) -> bool {
     // (centre angle, first course, last course, half-width in radians)
-    const OPENINGS: [(f32, u32, u32, f32); 5] = [
-        (0.0, 1, 7, 0.22),  // door
-        (1.6, 9, 13, 0.14), // windows, two storeys, staggered
-        (3.4, 9, 13, 0.14),
-        (4.9, 9, 13, 0.14),
-        (2.5, 15, 18, 0.12),
+    const OPENINGS: [(f32, u32, u32, f32); 8] = [
+        (5.3, 1, 7, 0.36),  // door
+        (1.6, 9, 13, 0.26), // windows, two storeys, staggered
+        (3.4, 9, 13, 0.26),
+        (4.7, 9, 13, 0.26),
+        (0.2, 10, 14, 0.24),
+        (2.5, 15, 18, 0.22),
+        (5.9, 14, 17, 0.22),
+        (4.0, 3, 6, 0.2), // a low slit
     ];
     OPENINGS.iter().any(|&(centre, first, last, half)| {
         if course < first || course > last {
