@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand};
 
 use shapeshifter::encode::{self, EncodeOptions, Pooling};
 use shapeshifter::render::{self, RenderOptions};
-use shapeshifter::{dataset, info, mesh, vdb};
+use shapeshifter::{dataset, edit, info, mesh, vdb};
 
 #[derive(Parser, Debug)]
 #[command(name = "shapeshifter", version, about = "3D shape variations from one exemplar mesh (ShapeShifter, CVPR 2025)")]
@@ -61,6 +61,18 @@ pub enum Command {
         #[command(flatten)]
         view: ViewArgs,
     },
+    /// Edit a level file: delete a box of voxels, or copy one elsewhere
+    /// (voxel coordinates as `info` prints them). Writes a new level file;
+    /// `sample --from` continues the finer levels from it.
+    ///
+    /// Example: shapeshifter edit v/level_1.vdb -o edited.vdb copy --box 10,0,10:20,40,20 --to 30,0,10
+    Edit {
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(subcommand)]
+        op: EditOp,
+    },
     /// Render a level file's oriented coloured points, or a mesh, to a PNG.
     ///
     /// Example: shapeshifter render out/tower/level_4.vdb -o level_4.png --azimuth 120
@@ -72,6 +84,27 @@ pub enum Command {
         output: PathBuf,
         #[command(flatten)]
         view: ViewArgs,
+    },
+}
+
+/// Copy-and-paste editing of a level file.
+#[derive(Subcommand, Debug)]
+pub enum EditOp {
+    /// Delete the voxels inside a box.
+    Delete {
+        /// Inclusive box in voxel coordinates: x0,y0,z0:x1,y1,z1.
+        #[arg(long = "box", value_name = "BOX")]
+        region: String,
+    },
+    /// Copy the voxels inside a box, with their features, so that the box's
+    /// minimum corner lands on --to.
+    Copy {
+        /// Inclusive box in voxel coordinates: x0,y0,z0:x1,y1,z1.
+        #[arg(long = "box", value_name = "BOX")]
+        region: String,
+        /// Destination of the box's minimum corner: x,y,z (voxels).
+        #[arg(long, allow_hyphen_values = true)]
+        to: String,
     },
 }
 
@@ -181,6 +214,25 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 manifest.levels.iter().map(|l| format!("{}^3: {} voxels", l.resolution, l.voxels)).collect::<Vec<_>>().join(", ")
             );
             println!("{}", output.join(dataset::MANIFEST).display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Edit { input, output, op } => {
+            let (mut level, provenance) = vdb::read_level(&input)?;
+            let what = match op {
+                EditOp::Delete { region } => {
+                    let n = edit::delete_box(&mut level, edit::VoxelBox::parse(&region)?);
+                    format!("deleted {n} voxels")
+                }
+                EditOp::Copy { region, to } => {
+                    let to = edit::parse_ivec3(&to)
+                        .ok_or_else(|| anyhow::anyhow!("--to '{to}': expected x,y,z in voxels"))?;
+                    let n = edit::copy_box(&mut level, edit::VoxelBox::parse(&region)?, to)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
+                    format!("copied {n} voxels")
+                }
+            };
+            vdb::write_level(&output, &level, &provenance, vdb::WriteOptions::default())?;
+            log::info!("{what}; {} voxels -> {}", level.len(), output.display());
             Ok(ExitCode::SUCCESS)
         }
         Command::Render { input, output, view } => {

@@ -8,6 +8,7 @@
 pub mod config;
 pub mod dataset;
 pub mod diffusion;
+pub mod edit;
 pub mod encode;
 pub mod error;
 pub mod exemplar;

@@ -1,0 +1,103 @@
+//! The encode, render and edit commands as a user runs them: outputs, and
+//! clean failures that leave nothing behind.
+
+mod common;
+
+use common::*;
+use shapeshifter::{dataset, exemplar, mesh, vdb};
+
+/// Writes the small demo tower as a PLY in `dir`.
+fn small_tower_ply(dir: &std::path::Path) -> std::path::PathBuf {
+    let p = dir.join("tower.ply");
+    mesh::save(&exemplar::small_tower(), &p, true).unwrap();
+    p
+}
+
+#[test]
+fn encode_writes_levels_manifest_and_previews() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = small_tower_ply(dir.path());
+    let out = dir.path().join("enc");
+    let o = shapeshifter(&[
+        "encode", ply.to_str().unwrap(), "-o", out.to_str().unwrap(),
+        "--sampling-resolution", "128", "--finest", "64", "--preview", "--width", "200", "--height", "200",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (manifest, levels) = dataset::read(&out).unwrap();
+    assert_eq!(manifest.levels.len(), 3);
+    assert_eq!(levels.iter().map(|l| l.resolution).collect::<Vec<_>>(), vec![16, 32, 64]);
+    assert!(!manifest.open_surface, "the stones are closed boxes");
+    assert_eq!(manifest.source_sha256, dataset::file_sha256(&ply).unwrap());
+    for l in &levels {
+        assert!(out.join(format!("level_{}.png", l.index)).is_file());
+        assert_eq!(l.len(), manifest.levels[l.index].voxels);
+        // Points sit in the exemplar's frame: inside the mesh's bounds (plus a voxel).
+        let (lo, hi) = exemplar::small_tower().bounds();
+        let slack = (l.voxel_size() / l.frame.scale) as f32;
+        for i in 0..l.len() {
+            let p = l.point_world(i).as_vec3();
+            assert!(p.cmpge(lo - slack).all() && p.cmple(hi + slack).all(), "point {p} outside {lo}..{hi}");
+        }
+    }
+}
+
+#[test]
+fn encode_bad_inputs_leave_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("enc");
+    let missing = dir.path().join("missing.obj");
+    let o = shapeshifter(&["encode", missing.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert_clean_failure(&o, "missing.obj", "no such file");
+    assert!(!out.exists(), "no output folder for a failed encode");
+    let ply = small_tower_ply(dir.path());
+    let o = shapeshifter(&["encode", ply.to_str().unwrap(), "-o", out.to_str().unwrap(), "--finest", "100"]);
+    assert_clean_failure(&o, "", "power of two");
+    assert!(!out.exists());
+}
+
+#[test]
+fn render_level_and_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = small_tower_ply(dir.path());
+    let png = dir.path().join("mesh.png");
+    let o = shapeshifter(&["render", ply.to_str().unwrap(), "-o", png.to_str().unwrap(), "--width", "120", "--height", "90"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (120, 90));
+    // A broken level file: clean error, no PNG.
+    let bad = dir.path().join("bad.vdb");
+    std::fs::write(&bad, b"not a vdb").unwrap();
+    let png2 = dir.path().join("bad.png");
+    assert_clean_failure(&shapeshifter(&["render", bad.to_str().unwrap(), "-o", png2.to_str().unwrap()]), "bad.vdb", "");
+    assert!(!png2.exists());
+}
+
+#[test]
+fn edit_copies_and_deletes_boxes() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = small_tower_ply(dir.path());
+    let out = dir.path().join("enc");
+    let o = shapeshifter(&["encode", ply.to_str().unwrap(), "-o", out.to_str().unwrap(), "--sampling-resolution", "64", "--finest", "32"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let src = out.join("level_1.vdb");
+    let (level, _) = vdb::read_level(&src).unwrap();
+    let edited = dir.path().join("deleted.vdb");
+    let o = shapeshifter(&["edit", src.to_str().unwrap(), "-o", edited.to_str().unwrap(), "delete", "--box", "0,0,0:15,31,31"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (del, _) = vdb::read_level(&edited).unwrap();
+    assert!(del.len() < level.len() && !del.is_empty());
+    assert!(del.coords.iter().all(|c| c.x > 15));
+    // Copy the right half onto the left: the level becomes mirror-free but full again.
+    let copied = dir.path().join("copied.vdb");
+    let o = shapeshifter(&[
+        "edit", edited.to_str().unwrap(), "-o", copied.to_str().unwrap(), "copy", "--box", "16,0,0:31,31,31", "--to", "0,0,0",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (cp, _) = vdb::read_level(&copied).unwrap();
+    assert_eq!(cp.len(), 2 * del.len());
+    // Out of the grid: clean error, no file.
+    let oob = dir.path().join("oob.vdb");
+    let o = shapeshifter(&["edit", src.to_str().unwrap(), "-o", oob.to_str().unwrap(), "copy", "--box", "0,0,0:31,31,31", "--to", "10,0,0"]);
+    assert_clean_failure(&o, "level_1.vdb", "grid");
+    assert!(!oob.exists());
+}
