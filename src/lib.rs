@@ -16,6 +16,7 @@ mod ffi;
 pub mod info;
 pub mod level;
 pub mod mesh;
+pub mod metrics;
 pub mod render;
 pub mod vdb;
 
