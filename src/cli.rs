@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand};
 
 use shapeshifter::encode::{self, EncodeOptions, Pooling};
 use shapeshifter::render::{self, RenderOptions};
-use shapeshifter::{dataset, edit, info, mesh, vdb};
+use shapeshifter::{dataset, edit, evaluate, info, mesh, vdb};
 
 #[derive(Parser, Debug)]
 #[command(name = "shapeshifter", version, about = "3D shape variations from one exemplar mesh (ShapeShifter, CVPR 2025)")]
@@ -72,6 +72,28 @@ pub enum Command {
         output: PathBuf,
         #[command(subcommand)]
         op: EditOp,
+    },
+    /// Evaluate variants against the exemplar (METHOD.md section 7): LP-IoU
+    /// and LP-F-score per variant, diversity (mean pairwise 1 - IoU), and the
+    /// Chamfer distance of the coarsest level. Prints a table; writes JSON.
+    ///
+    /// Example: shapeshifter eval out/tower/exemplar out/tower/variants/variant_* -o eval.json
+    Eval {
+        /// The encoded exemplar folder (from `encode`).
+        exemplar: PathBuf,
+        /// Variant folders (level_K.vdb files, and mesh.ply where meshed).
+        #[arg(required = true)]
+        variants: Vec<PathBuf>,
+        /// The exemplar mesh: with it, and a mesh.ply in every variant, shapes
+        /// are voxelised as solids (the paper's way); else as point shells.
+        #[arg(long)]
+        exemplar_mesh: Option<PathBuf>,
+        /// Solid voxelisation: voxels along the exemplar's longest axis.
+        #[arg(long, default_value_t = 256)]
+        resolution: u32,
+        /// Write the report as JSON here.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
     },
     /// Render a level file's oriented coloured points, or a mesh, to a PNG.
     ///
@@ -233,6 +255,20 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             };
             vdb::write_level(&output, &level, &provenance, vdb::WriteOptions::default())?;
             log::info!("{what}; {} voxels -> {}", level.len(), output.display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Eval { exemplar, variants, exemplar_mesh, resolution, output } => {
+            let mesh = exemplar_mesh.as_deref().map(mesh::load).transpose()?;
+            let files = variants.iter().map(|d| evaluate::read_variant(d)).collect::<Result<Vec<_>, _>>()?;
+            let (report, mode) = evaluate::evaluate(&exemplar, mesh.as_ref(), &files, resolution)?;
+            println!("voxelisation: {mode:?}");
+            print!("{}", report.table());
+            if let Some(out) = output {
+                let text = serde_json::to_string_pretty(&report)?;
+                shapeshifter::error::write_atomically(&out, |tmp| {
+                    std::fs::write(tmp, &text).map_err(|e| shapeshifter::Error::file(&out, e.to_string()))
+                })?;
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Render { input, output, view } => {

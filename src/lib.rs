@@ -11,6 +11,7 @@ pub mod diffusion;
 pub mod edit;
 pub mod encode;
 pub mod error;
+pub mod evaluate;
 pub mod exemplar;
 mod ffi;
 pub mod info;
