@@ -40,6 +40,12 @@ pub fn parse_ivec3(text: &str) -> Option<IVec3> {
     (v.len() == 3).then(|| IVec3::new(v[0], v[1], v[2]))
 }
 
+/// Parses `x,y,z` floats.
+pub fn parse_vec3(text: &str) -> Option<[f32; 3]> {
+    let v: Vec<f32> = text.split(',').map(|s| s.trim().parse().ok()).collect::<Option<_>>()?;
+    (v.len() == 3).then(|| [v[0], v[1], v[2]])
+}
+
 /// Removes the voxels inside `region`; returns how many were removed.
 pub fn delete_box(level: &mut Level, region: VoxelBox) -> usize {
     let before = level.len();

@@ -13,12 +13,18 @@ pub mod encode;
 pub mod error;
 pub mod evaluate;
 pub mod exemplar;
+pub mod grid;
 mod ffi;
 pub mod info;
 pub mod level;
 pub mod mesh;
+pub mod nn;
+pub mod pipeline;
 pub mod metrics;
 pub mod render;
+pub mod sample;
+pub mod sparse_conv;
+pub mod train;
 pub mod vdb;
 
 pub use error::{Error, Result};
