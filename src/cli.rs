@@ -21,6 +21,10 @@ pub struct Cli {
     /// More detail on stderr (-vv for debug).
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
     pub verbose: u8,
+    /// libtorch CPU threads (0 = libtorch's default). On a loaded 2-core
+    /// machine 1 was measured 7-10x faster than 2 for training.
+    #[arg(long, global = true, default_value_t = 0, env = "SHAPESHIFTER_THREADS")]
+    pub threads: i32,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -366,6 +370,9 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool) -
 
 pub fn run(cli: Cli) -> Result<ExitCode> {
     let quiet = cli.quiet;
+    if cli.threads > 0 {
+        tch::set_num_threads(cli.threads);
+    }
     match cli.command {
         Command::Info { files } => {
             let mut failed = 0;

@@ -1,0 +1,246 @@
+//! Training and sampling on a tiny procedural exemplar (spheres at 8 and 16).
+use std::sync::atomic::AtomicBool;
+
+use glam::{DVec3, IVec3};
+use tch::{Device, Kind, Tensor};
+use shapeshifter::config::Config;
+use shapeshifter::level::Level;
+use shapeshifter::nn::{new_diffusion, new_upsampler};
+use shapeshifter::sample::{level0_box, load_models, sample, SampleOptions};
+use shapeshifter::sparse_conv::SparseTensor;
+use shapeshifter::train::{state_path, synthetic::sphere_levels, train_level, train_level_with, TrainState};
+
+/// libtorch's CPU kernels are bitwise reproducible only when one thread at a time
+/// runs them (concurrent callers share the intra-op pool and split work
+/// differently), so these tests, which compare runs bit for bit, take turns.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    let g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    // one intra-op thread: ~10x faster on the shared 2-core machine (see report)
+    tch::set_num_threads(1);
+    g
+}
+
+fn exemplar() -> Vec<Level> {
+    sphere_levels(&[8, 16], DVec3::new(0.05, -0.1, 0.0), 0.55)
+}
+
+fn tiny(over: &[&str]) -> Config {
+    let mut o: Vec<String> = [
+        "model.channels=8",
+        "model.upsampler_channels=8",
+        "train.level0_batch=2",
+        "train.upper_batch=2",
+        "train.crop=7",
+        "train.level0_iterations=60",
+        "train.upper_iterations=60",
+        "train.upsampler_iterations=60",
+        "train.lr=3e-3",
+        "train.upsampler_lr=3e-3",
+        "sample.level0_steps=8",
+        "sample.upper_steps=4",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    o.extend(over.iter().map(|s| s.to_string()));
+    Config::load("cpu", &o).unwrap()
+}
+
+fn read_state(dir: &std::path::Path, level: usize) -> TrainState {
+    serde_json::from_str(&std::fs::read_to_string(state_path(dir, level)).unwrap()).unwrap()
+}
+
+#[test]
+fn training_lowers_the_loss_at_level_0_and_1() {
+    let _guard = serial();
+    let levels = exemplar();
+    let config = tiny(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    let r0 = train_level(&levels, 0, &config, Device::Cpu, dir.path(), false, false).unwrap();
+    assert_eq!(r0.diffusion_steps, 60);
+    assert!(r0.finished && !r0.interrupted);
+    assert!(r0.diffusion_loss_end < 0.8 * r0.diffusion_loss_start, "level 0: {r0:?}");
+    let r1 = train_level(&levels, 1, &config, Device::Cpu, dir.path(), false, false).unwrap();
+    assert_eq!((r1.upsampler_steps, r1.diffusion_steps), (60, 60));
+    assert!(r1.upsampler_loss_end < 0.8 * r1.upsampler_loss_start, "upsampler: {r1:?}");
+    assert!(r1.diffusion_loss_end < 0.8 * r1.diffusion_loss_start, "level 1: {r1:?}");
+    for f in ["level_0_diffusion.safetensors", "level_1_diffusion.safetensors", "level_1_upsampler.safetensors",
+              "level_0_loss.png", "level_1_loss.png", "level_0_state.json", "level_1_state.json"] {
+        assert!(dir.path().join(f).is_file(), "{f}");
+    }
+    assert!(dir.path().join("level_0_upsampler.safetensors").exists() == false);
+    let st = read_state(dir.path(), 1);
+    assert_eq!(st.diffusion_loss.len(), 60);
+    assert_eq!(st.upsampler_loss.len(), 60);
+    assert!(st.finished);
+    // no temporary files left
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap()
+        .filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().contains(".tmp")).collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // same seed, same run
+    let dir2 = tempfile::tempdir().unwrap();
+    let r0b = train_level(&levels, 0, &config, Device::Cpu, dir2.path(), false, false).unwrap();
+    assert_eq!(read_state(dir.path(), 0).diffusion_loss, read_state(dir2.path(), 0).diffusion_loss);
+    assert_eq!(r0.diffusion_loss_end, r0b.diffusion_loss_end);
+}
+
+#[test]
+fn checkpoint_round_trip_gives_the_same_outputs() {
+    let _guard = serial();
+    let config = tiny(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    let x = SparseTensor::from_level(&exemplar()[0], Device::Cpu).unwrap();
+    tch::manual_seed(1);
+    let a = new_diffusion(&config.model, 1, Device::Cpu).unwrap();
+    let ua = new_upsampler(&config.model, Device::Cpu).unwrap();
+    a.save(&dir.path().join("d.safetensors")).unwrap();
+    ua.save(&dir.path().join("u.safetensors")).unwrap();
+    tch::manual_seed(2);
+    let mut b = new_diffusion(&config.model, 1, Device::Cpu).unwrap();
+    let mut ub = new_upsampler(&config.model, Device::Cpu).unwrap();
+    let ya = a.net.forward_at(&x, 0.2, false).unwrap().feats;
+    let before = b.net.forward_at(&x, 0.2, false).unwrap().feats;
+    assert!(!ya.equal(&before), "different seeds must give different models");
+    b.load(&dir.path().join("d.safetensors")).unwrap();
+    ub.load(&dir.path().join("u.safetensors")).unwrap();
+    assert!(ya.equal(&b.net.forward_at(&x, 0.2, false).unwrap().feats));
+    assert!(ua.net.forward_t(&x, false).unwrap().feats.equal(&ub.net.forward_t(&x, false).unwrap().feats));
+    // a level-0 model does not load into a level-1 shape
+    let mut c = new_diffusion(&config.model, 0, Device::Cpu).unwrap();
+    assert!(c.load(&dir.path().join("d.safetensors")).is_err());
+}
+
+#[test]
+fn resume_continues_the_step_count() {
+    let _guard = serial();
+    let levels = exemplar();
+    let dir = tempfile::tempdir().unwrap();
+    let short = tiny(&["train.upper_iterations=5", "train.upsampler_iterations=4", "train.checkpoint_minutes=0"]);
+    // interrupted right after the first step
+    let stop = AtomicBool::new(true);
+    let r = train_level_with(&levels, 1, &short, Device::Cpu, dir.path(), false, false, Some(&stop)).unwrap();
+    assert!(r.interrupted && !r.finished);
+    assert_eq!((r.upsampler_steps, r.diffusion_steps), (1, 0));
+    assert_eq!(read_state(dir.path(), 1).upsampler_steps, 1);
+    let r = train_level(&levels, 1, &short, Device::Cpu, dir.path(), true, false).unwrap();
+    assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (3, 5));
+    assert_eq!((r.upsampler_steps, r.diffusion_steps), (4, 5));
+    assert!(r.finished);
+    let first = read_state(dir.path(), 1);
+    // more iterations: the count goes on, the history is kept
+    let long = tiny(&["train.upper_iterations=8", "train.upsampler_iterations=4"]);
+    let r = train_level(&levels, 1, &long, Device::Cpu, dir.path(), true, false).unwrap();
+    assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (0, 3));
+    assert_eq!(r.diffusion_steps, 8);
+    let second = read_state(dir.path(), 1);
+    assert_eq!(second.diffusion_loss.len(), 8);
+    assert_eq!(&second.diffusion_loss[..5], &first.diffusion_loss[..]);
+    assert_eq!(second.upsampler_loss, first.upsampler_loss);
+    // finished: resuming again does nothing
+    let r = train_level(&levels, 1, &long, Device::Cpu, dir.path(), true, false).unwrap();
+    assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (0, 0));
+    // another model configuration refuses to resume
+    let other = tiny(&["model.channels=4"]);
+    assert!(train_level(&levels, 1, &other, Device::Cpu, dir.path(), true, false).is_err());
+    // without resume it starts afresh
+    let r = train_level(&levels, 1, &short, Device::Cpu, dir.path(), false, false).unwrap();
+    assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (4, 5));
+}
+
+fn trained(dir: &std::path::Path, config: &Config) -> Vec<Level> {
+    let levels = exemplar();
+    for l in 0..2 {
+        train_level(&levels, l, config, Device::Cpu, dir, false, false).unwrap();
+    }
+    levels
+}
+
+fn same(a: &[Vec<Level>], b: &[Vec<Level>]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(x, y)| {
+            x.len() == y.len()
+                && x.iter().zip(y).all(|(p, q)| p.coords == q.coords && p.offsets == q.offsets && p.normals == q.normals && p.colours == q.colours)
+        })
+}
+
+#[test]
+fn sampling_is_reproducible_and_follows_options() {
+    let _guard = serial();
+    let config = tiny(&["train.level0_iterations=30", "train.upper_iterations=20", "train.upsampler_iterations=20"]);
+    let dir = tempfile::tempdir().unwrap();
+    let levels = trained(dir.path(), &config);
+    let models = load_models(dir.path(), &config, 2, Device::Cpu).unwrap();
+    assert!(load_models(dir.path(), &config, 3, Device::Cpu).is_err());
+    let opts = SampleOptions::from_config(&config, 3, 7);
+    let a = sample(&models, &levels, &opts, None).unwrap();
+    let b = sample(&models, &levels, &opts, None).unwrap();
+    assert_eq!(a.len(), 3);
+    for v in &a {
+        assert_eq!(v.len(), 2);
+        assert_eq!((v[0].index, v[0].resolution, v[1].index, v[1].resolution), (0, 8, 1, 16));
+        assert_eq!(v[0].frame, levels[0].frame);
+        assert!(v[0].mask.iter().all(|&m| m == 1.0));
+    }
+    assert!(a.iter().map(|v| v[0].len()).sum::<usize>() > 0, "nothing sampled");
+    assert!(same(&a, &b), "same seed, different output");
+    let c = sample(&models, &levels, &SampleOptions { seed: 8, ..opts.clone() }, None).unwrap();
+    assert!(!same(&a, &c), "different seed, same output");
+    assert!(!same(&a[0..1], &a[1..2]), "variants are identical");
+    // ddpm works too
+    let d = sample(&models, &levels, &SampleOptions { sampler: "ddpm".into(), ..opts.clone() }, None).unwrap();
+    assert_eq!(d[0].len(), 2);
+
+    // fine levels only contain children of the coarse level
+    for v in &a {
+        let parents: std::collections::HashSet<IVec3> = v[0].coords.iter().cloned().collect();
+        assert!(v[1].coords.iter().all(|c| parents.contains(&c.div_euclid(IVec3::splat(2)))));
+    }
+
+    // extent [2, 1, 1]: a level-0 box twice as long in x, same centre
+    let (lo, size) = level0_box(&levels[0], [1.0; 3]).unwrap();
+    let (lo2, size2) = level0_box(&levels[0], [2.0, 1.0, 1.0]).unwrap();
+    assert_eq!(size2, IVec3::new(2 * size.x, size.y, size.z));
+    assert_eq!(lo2.y, lo.y);
+    assert_eq!(2 * lo2.x + size2.x, 2 * lo.x + size.x, "centre kept");
+    let wide = sample(&models, &levels, &SampleOptions { extent: [2.0, 1.0, 1.0], stop_level: Some(0), ..opts.clone() }, None).unwrap();
+    let mut xmin = i32::MAX;
+    let mut xmax = i32::MIN;
+    for v in &wide {
+        assert_eq!(v.len(), 1);
+        for c in &v[0].coords {
+            assert!(c.cmpge(lo2).all() && c.cmplt(lo2 + size2).all());
+            xmin = xmin.min(c.x);
+            xmax = xmax.max(c.x);
+        }
+    }
+    assert!(xmax - xmin + 1 > size.x, "wide variants span {}..{} only", xmin, xmax);
+
+    // continuing from an edited level 0 gives level 1 only, under the edited voxels
+    let mut edited = a[0][0].clone();
+    let keep_x = edited.coords.iter().map(|c| c.x).min().unwrap() + 2;
+    let xs: Vec<i32> = edited.coords.iter().map(|c| c.x).collect();
+    edited.retain(|i| xs[i] < keep_x);
+    let kept: std::collections::HashSet<IVec3> = edited.coords.iter().cloned().collect();
+    assert!(!kept.is_empty());
+    let cont = sample(&models, &levels, &SampleOptions { n: 2, ..opts.clone() }, Some(edited.clone())).unwrap();
+    assert_eq!(cont.len(), 2);
+    for v in &cont {
+        assert_eq!(v.len(), 1);
+        assert_eq!((v[0].index, v[0].resolution), (1, 16));
+        assert!(v[0].coords.iter().all(|c| kept.contains(&c.div_euclid(IVec3::splat(2)))));
+    }
+    // continuing from the unedited level reproduces the full run's finer level
+    // (up to the float round trip of the colours through a Level)
+    let full1 = sample(&models, &levels, &SampleOptions { n: 1, ..opts.clone() }, None).unwrap();
+    let cont1 = sample(&models, &levels, &SampleOptions { n: 1, ..opts.clone() }, Some(full1[0][0].clone())).unwrap();
+    assert_eq!(cont1[0][0].coords, full1[0][1].coords);
+    let d = cont1[0][0].offsets.iter().zip(&full1[0][1].offsets).map(|(a, b)| (*a - *b).abs().max_element()).fold(0f32, f32::max);
+    assert!(d < 1e-3, "{d}");
+    // nothing finer than the last level
+    let mut last = a[0][1].clone();
+    last.index = 1;
+    assert!(sample(&models, &levels, &opts, Some(last)).is_err());
+    let _ = Tensor::zeros([1], (Kind::Float, Device::Cpu));
+}
