@@ -490,7 +490,12 @@ impl SparseGrid {
             // SAFETY: freshly allocated contiguous int64 tensor of n * k3 elements,
             // written only here, before anyone else can see it.
             let table = unsafe { std::slice::from_raw_parts_mut(cpu.data_ptr() as *mut i64, n * k3) };
-            let keys = &self.keys[..];
+            // The keys followed by k + 1 copies of u64::MAX: every cursor stops inside
+            // the array without a bounds test, and the slot loop below runs branch-free.
+            let mut padded = Vec::with_capacity(n + k + 1);
+            padded.extend_from_slice(&self.keys);
+            padded.resize(n + k + 1, u64::MAX);
+            let keys = &padded[..];
             // One key offset per (dx, dy) column, in column order.
             let deltas: Vec<u64> = (-r..=r)
                 .flat_map(|dx| (-r..=r).map(move |dy| key_delta(IVec3::new(dx as i32, dy as i32, 0))))
@@ -504,25 +509,22 @@ impl SparseGrid {
                     .iter()
                     .map(|&d| {
                         let lo = block_keys[0].wrapping_add(d).wrapping_sub(r as u64);
-                        keys.partition_point(|&key| key < lo)
+                        keys[..n].partition_point(|&key| key < lo)
                     })
                     .collect();
                 for (&key, row) in block_keys.iter().zip(block.chunks_exact_mut(k3)) {
                     for ((&d, p), out) in deltas.iter().zip(cursors.iter_mut()).zip(row.chunks_exact_mut(k)) {
                         // Step 2: advance this column's cursor to the first key >= lo.
                         let lo = key.wrapping_add(d).wrapping_sub(r as u64);
-                        while *p < n && keys[*p] < lo {
+                        while keys[*p] < lo {
                             *p += 1;
                         }
                         // Step 3: the z-neighbours lo..=lo+2r are consecutive keys.
                         let mut q = *p;
                         for (dz, slot) in out.iter_mut().enumerate() {
-                            if q < n && keys[q] == lo.wrapping_add(dz as u64) {
-                                *slot = q as i64;
-                                q += 1;
-                            } else {
-                                *slot = missing;
-                            }
+                            let hit = keys[q] == lo.wrapping_add(dz as u64);
+                            *slot = if hit { q as i64 } else { missing };
+                            q += hit as usize;
                         }
                     }
                 }
