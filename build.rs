@@ -4,7 +4,8 @@
 
 use std::path::Path;
 
-const CPP_FILES: &[&str] = &["cpp/mesh_io.cpp", "cpp/vdb_io.cpp", "cpp/vdb_points.cpp"];
+const CPP_FILES: &[&str] =
+    &["cpp/mesh_io.cpp", "cpp/vdb_io.cpp", "cpp/vdb_points.cpp", "cpp/recon_poisson.cpp"];
 
 fn main() {
     let mut build = cxx_build::bridge("src/ffi.rs");

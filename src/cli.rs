@@ -182,6 +182,34 @@ pub enum Command {
         #[command(flatten)]
         run: RunArgs,
     },
+    /// Mesh a level file's oriented coloured points: Poisson (CGAL; closed
+    /// shapes) or APSS (algebraic point set surfaces; open surfaces stay
+    /// open). `auto` picks APSS when the exemplar was open. Vertex colours
+    /// from the nearest points; output in the exemplar's frame.
+    ///
+    /// Example: shapeshifter mesh out/tower/level_4.vdb -o tower.ply --method poisson
+    Mesh {
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        #[arg(long, default_value = "auto")]
+        method: String,
+        /// Contouring grid cells along the longest axis.
+        #[arg(long, default_value_t = 512)]
+        resolution: u32,
+        /// Also write a PNG preview of the mesh here.
+        #[arg(long)]
+        preview: Option<PathBuf>,
+    },
+    /// Write a level file's oriented coloured points as a PLY point cloud
+    /// (x y z nx ny nz red green blue), for tools that want points.
+    ///
+    /// Example: shapeshifter points out/tower/level_4.vdb -o tower_points.ply
+    Points {
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Render a level file's oriented coloured points, or a mesh, to a PNG.
     ///
     /// Example: shapeshifter render out/tower/level_4.vdb -o level_4.png --azimuth 120
@@ -349,6 +377,10 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool) -
         &levels, &mesh.name, !mesh.is_closed(), &config, device, &models_dir, &variants_dir, &options, true,
     )?;
     times.push(("sample", t.elapsed().as_secs_f64()));
+    let t = std::time::Instant::now();
+    let meshed = pipeline::mesh_stage(&dirs, !mesh.is_closed(), 256)?;
+    log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
+    times.push(("mesh", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
     let files = dirs.iter().map(|d| evaluate::read_variant(d)).collect::<Result<Vec<_>, _>>()?;
     let (report, mode) = evaluate::evaluate(&exemplar_dir, None, &files, 256)?;
@@ -534,6 +566,34 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Demo { output, run } => {
             run_one(Source::Demo, &output, &run, quiet)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Mesh { input, output, method, resolution, preview } => {
+            let (level, provenance) = vdb::read_level(&input)?;
+            let method = match method.as_str() {
+                "auto" => None,
+                m => Some(m.parse::<shapeshifter::recon::Method>().map_err(|e| anyhow::anyhow!("--method: {e}"))?),
+            };
+            let t = std::time::Instant::now();
+            let (m, used) = pipeline::mesh_level(&level, provenance.exemplar_open, method, resolution)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
+            mesh::save(&m, &output, true)?;
+            if let Some(png) = preview {
+                render::save_png(&render::render_mesh(&m, &pipeline::preview_options())?, &png)?;
+            }
+            log::info!(
+                "{used}: {} vertices, {} triangles, {} boundary edges in {:.1} s -> {}",
+                m.positions.len(), m.triangles.len(), m.edge_counts().0, t.elapsed().as_secs_f64(), output.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Points { input, output } => {
+            let (level, _) = vdb::read_level(&input)?;
+            let p = pipeline::oriented_points(&level);
+            if p.positions.is_empty() {
+                anyhow::bail!("{}: no active voxels", input.display());
+            }
+            mesh::save_points_ply(&output, &p.positions, &p.normals, &p.colours)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Render { input, output, view } => {

@@ -68,6 +68,74 @@ pub mod bridge {
         pub meta: Vec<MetaEntry>,
     }
 
+    /// Parameters of CGAL's Poisson reconstruction. `spacing` and `grid_cell`
+    /// are in world units, `sm_radius` and `sm_distance` in spacings.
+    #[derive(Clone, Debug)]
+    pub struct PoissonParams {
+        /// Sample spacing in world units; <= 0: CGAL's average spacing (6 neighbours).
+        pub spacing: f64,
+        /// Surface mesher: lower bound of the triangle angles, degrees.
+        pub sm_angle: f64,
+        /// Surface mesher: upper bound of the surface Delaunay ball radii (spacings).
+        pub sm_radius: f64,
+        /// Surface mesher: upper bound of the centre-centre distances (spacings).
+        pub sm_distance: f64,
+        /// Conjugate gradient: relative residual; <= 0: Eigen's default (machine epsilon).
+        pub solver_tolerance: f64,
+        /// Conjugate gradient: iteration cap; 0: Eigen's default (2 x unknowns).
+        pub solver_max_iterations: u32,
+        /// Grid cell of `poisson_grid`, world units (unused by `poisson_reconstruct`).
+        pub grid_cell: f64,
+    }
+
+    /// Where the time went (process CPU seconds), and how big things got.
+    #[derive(Clone, Debug, Default)]
+    pub struct PoissonStats {
+        /// The spacing actually used (world units).
+        pub spacing: f64,
+        /// Vertices of the refined Delaunay triangulation (= unknowns + 1).
+        pub delaunay_vertices: u64,
+        pub solver_iterations: u64,
+        /// Relative residual reached by the solver.
+        pub solver_error: f64,
+        /// Average spacing + first Delaunay insertion.
+        pub seconds_setup: f64,
+        /// Delaunay insertion of the input interleaved with refinement, and assembly.
+        pub seconds_refine: f64,
+        /// Sparse linear solve.
+        pub seconds_solve: f64,
+        /// Surface mesher, or the grid evaluation of `poisson_grid`.
+        pub seconds_mesh: f64,
+        /// Extraction and orientation of the triangles.
+        pub seconds_output: f64,
+        /// Grid corners evaluated by `poisson_grid`.
+        pub grid_corners: u64,
+    }
+
+    /// The Poisson function sampled on a sparse grid: bricks of 8^3 corners
+    /// around its zero set. Corner (i, j, k) lies at origin + (i, j, k) * cell.
+    #[derive(Clone, Debug, Default)]
+    pub struct PoissonGrid {
+        /// 3 ints per brick; brick b holds corners 8b .. 8b + 7 on each axis.
+        pub bricks: Vec<i32>,
+        /// 512 values per brick, corner (x, y, z) of the brick at (x * 8 + y) * 8 + z;
+        /// negative inside, NaN where not evaluated (away from the zero set).
+        pub values: Vec<f32>,
+        pub origin: [f64; 3],
+        pub cell: f64,
+        pub stats: PoissonStats,
+    }
+
+    /// A triangle mesh as flat arrays.
+    #[derive(Clone, Debug, Default)]
+    pub struct MeshOut {
+        /// 3 floats per vertex.
+        pub positions: Vec<f32>,
+        /// 3 vertex indices per triangle, counter-clockwise seen from outside.
+        pub triangles: Vec<u32>,
+        pub stats: PoissonStats,
+    }
+
     unsafe extern "C++" {
         include!("shapeshifter/cpp/mesh_io.h");
         fn read_mesh(path: &str) -> Result<MeshData>;
@@ -77,5 +145,19 @@ pub mod bridge {
         fn write_level_file(path: &str, level: &LevelData, half_floats: bool) -> Result<()>;
         fn read_level_file(path: &str) -> Result<LevelData>;
         fn summarise_vdb_file(path: &str) -> Result<Vec<GridSummary>>;
+
+        include!("shapeshifter/cpp/recon_poisson.h");
+        /// Poisson reconstruction through CGAL (unscreened, Delaunay-based),
+        /// contoured by CGAL's surface mesher; `points` and `normals` hold 3
+        /// floats per point (normals oriented outwards).
+        fn poisson_reconstruct(
+            points: &[f32],
+            normals: &[f32],
+            params: &PoissonParams,
+        ) -> Result<MeshOut>;
+        /// The same implicit function, sampled on a sparse grid of cell
+        /// `params.grid_cell` around its whole zero set (for surface nets).
+        fn poisson_grid(points: &[f32], normals: &[f32], params: &PoissonParams)
+            -> Result<PoissonGrid>;
     }
 }

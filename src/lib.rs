@@ -21,6 +21,7 @@ pub mod mesh;
 pub mod nn;
 pub mod pipeline;
 pub mod metrics;
+pub mod recon;
 pub mod render;
 pub mod sample;
 pub mod sparse_conv;

@@ -259,3 +259,31 @@ pub fn save(mesh: &Mesh, path: &Path, binary: bool) -> Result<()> {
         bridge::write_mesh(tmp_str, &data, binary).map_err(|e| Error::file(path, e.what()))
     })
 }
+
+/// Writes an oriented coloured point set as a binary little-endian PLY
+/// (x y z nx ny nz as float, red green blue as uchar), atomically. For tools
+/// that want points, not surfaces.
+pub fn save_points_ply(path: &Path, positions: &[Vec3], normals: &[Vec3], colours: &[Vec3]) -> Result<()> {
+    if positions.len() != normals.len() || positions.len() != colours.len() {
+        return Err(Error::Invalid("point, normal and colour counts differ".into()));
+    }
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment {}\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\n\
+         property float nx\nproperty float ny\nproperty float nz\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+        crate::vdb::CREATOR,
+        positions.len()
+    )
+    .into_bytes();
+    bytes.reserve(positions.len() * 27);
+    for ((p, n), c) in positions.iter().zip(normals).zip(colours) {
+        for v in p.to_array().into_iter().chain(n.to_array()) {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in c.to_array() {
+            bytes.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
+        }
+    }
+    write_atomically(path, |tmp| std::fs::write(tmp, &bytes).map_err(|e| Error::file(path, e.to_string())))
+}

@@ -217,3 +217,66 @@ pub fn record_config(dir: &Path, config: &Config) -> Result<()> {
     let text = config.to_toml();
     write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))
 }
+
+/// The surface voxels (mask > 0) of a level as oriented coloured points in
+/// the exemplar's frame; spacing = the level's voxel size in world units.
+pub fn oriented_points(level: &Level) -> crate::recon::OrientedPoints {
+    let keep: Vec<usize> = (0..level.len()).filter(|&i| level.mask[i] > 0.0).collect();
+    crate::recon::OrientedPoints {
+        positions: keep.iter().map(|&i| level.point_world(i).as_vec3()).collect(),
+        normals: keep.iter().map(|&i| level.normals[i].normalize_or_zero()).collect(),
+        colours: keep.iter().map(|&i| level.colours[i]).collect(),
+        spacing: (level.voxel_size() / level.frame.scale) as f32,
+    }
+}
+
+/// Meshes a level: Poisson for closed exemplars, APSS for open ones unless
+/// `method` says otherwise. `resolution`: contouring grid along the longest
+/// axis.
+pub fn mesh_level(
+    level: &Level,
+    exemplar_open: bool,
+    method: Option<crate::recon::Method>,
+    resolution: u32,
+) -> Result<(Mesh, crate::recon::Method)> {
+    use crate::recon::{self, ApssOptions, Method, PoissonOptions};
+    let method = method.unwrap_or(if exemplar_open { Method::Apss } else { Method::Poisson });
+    let points = oriented_points(level);
+    let poisson = PoissonOptions { resolution, ..Default::default() };
+    let apss = ApssOptions { resolution, ..Default::default() };
+    let m = recon::reconstruct(&points, method, &poisson, &apss).map_err(|e| Error::Invalid(e.to_string()))?;
+    let mesh = Mesh {
+        name: "mesh".into(),
+        positions: m.positions,
+        triangles: m.triangles,
+        colours: crate::mesh::MeshColours::PerVertex(m.colours),
+        texture: None,
+    };
+    Ok((mesh, method))
+}
+
+/// Meshes the finest level of every variant folder into `mesh.ply` and
+/// `mesh.png`; a variant that fails to mesh is reported and skipped.
+pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Result<usize> {
+    let mut done = 0;
+    for dir in dirs {
+        let files = crate::evaluate::read_variant(dir)?;
+        let out = dir.join("mesh.ply");
+        let d = digest(&[&format!("{:?}", files.finest.len()), &resolution.to_string(), &exemplar_open.to_string()]);
+        if is_done(dir, "mesh", &d) && out.is_file() {
+            done += 1;
+            continue;
+        }
+        match mesh_level(&files.finest, exemplar_open, None, resolution) {
+            Ok((mesh, _)) => {
+                crate::mesh::save(&mesh, &out, true)?;
+                let img = render::render_mesh(&mesh, &preview_options())?;
+                render::save_png(&img, &dir.join("mesh.png"))?;
+                mark_done(dir, "mesh", &d, 0.0)?;
+                done += 1;
+            }
+            Err(e) => log::warn!("{}: not meshed: {e}", dir.display()),
+        }
+    }
+    Ok(done)
+}
