@@ -1,0 +1,196 @@
+//! Meshes a procedural shape sampled one point per voxel at 256^3 (like the
+//! finest level of an encoded exemplar, ~150k points) with each method and
+//! prints time and peak memory. Each method runs in its own child process so
+//! that its peak RSS (VmHWM) is its own.
+//!
+//!   cargo run --release --example recon_bench [-- METHOD [key=value ...]]
+//!
+//! METHOD: all (default), poisson, apss.
+//! Keys: res=256 (sampling), mesher=cgal, sm_distance= sm_radius= sm_angle= tol=,
+//! resolution= (both), radius= band= (APSS).
+
+use glam::Vec3;
+use rayon::prelude::*;
+use shapeshifter::recon::{apss, poisson_report, ApssOptions, OrientedPoints, PoissonOptions, ReconMesh};
+use std::time::Instant;
+
+/// Sphere and torus, smoothly united, with a small wave on top, filling most of [-1,1]^3.
+pub fn sdf(p: Vec3) -> f32 {
+    const S: f32 = 1.18;
+    shape(p / S) * S
+}
+
+fn shape(p: Vec3) -> f32 {
+    let sphere = p.length() - 0.62;
+    let q = glam::Vec2::new(glam::Vec2::new(p.x, p.z).length() - 0.62, p.y);
+    let torus = q.length() - 0.2;
+    let k = 0.1;
+    let h = (0.5 + 0.5 * (torus - sphere) / k).clamp(0.0, 1.0);
+    let blend = torus + (sphere - torus) * h - k * h * (1.0 - h);
+    blend + 0.015 * (9.0 * p.x).sin() * (9.0 * p.y).sin() * (9.0 * p.z).sin()
+}
+
+pub fn sample(res: i32) -> OrientedPoints {
+    let vs = 2.0 / res as f32;
+    let e = vs * 1e-2;
+    let slabs: Vec<Vec<(Vec3, Vec3)>> = (0..res)
+        .into_par_iter()
+        .map(|i| {
+            let mut out = Vec::new();
+            for j in 0..res {
+                for k in 0..res {
+                    let c = Vec3::splat(-1.0) + (Vec3::new(i as f32, j as f32, k as f32) + 0.5) * vs;
+                    let d = sdf(c);
+                    if d.abs() >= 0.5 * vs {
+                        continue;
+                    }
+                    let g = Vec3::new(
+                        sdf(c + Vec3::X * e) - sdf(c - Vec3::X * e),
+                        sdf(c + Vec3::Y * e) - sdf(c - Vec3::Y * e),
+                        sdf(c + Vec3::Z * e) - sdf(c - Vec3::Z * e),
+                    )
+                    .normalize();
+                    out.push((c - g * d, g));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut pts = OrientedPoints { spacing: vs, ..Default::default() };
+    for (p, n) in slabs.into_iter().flatten() {
+        pts.positions.push(p);
+        pts.normals.push(n);
+        pts.colours.push(p * 0.5 + 0.5);
+    }
+    pts
+}
+
+/// User + system CPU seconds of this process.
+pub fn cpu_seconds() -> f64 {
+    let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let rest = s.rsplit(')').next().unwrap_or("");
+    let f: Vec<f64> = rest.split_whitespace().filter_map(|v| v.parse().ok()).collect();
+    // after the command name: state(skipped, not numeric) ppid ... utime is field 14 overall
+    if f.len() > 12 { (f[10] + f[11]) / 100.0 } else { f64::NAN }
+}
+
+pub fn peak_rss_mib() -> f64 {
+    let s = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    s.lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// Connected components (over shared edges), edges used by more than two
+/// triangles, and the Euler characteristic V - E + F.
+pub fn topology(m: &ReconMesh) -> (usize, usize, i64) {
+    let mut edges: Vec<(u32, u32, u32)> = m
+        .triangles
+        .iter()
+        .enumerate()
+        .flat_map(|(t, v)| (0..3).map(move |i| (v[i].min(v[(i + 1) % 3]), v[i].max(v[(i + 1) % 3]), t as u32)))
+        .collect();
+    edges.par_sort_unstable();
+    let mut parent: Vec<u32> = (0..m.triangles.len() as u32).collect();
+    fn find(p: &mut [u32], mut a: u32) -> u32 {
+        while p[a as usize] != a {
+            p[a as usize] = p[p[a as usize] as usize];
+            a = p[a as usize];
+        }
+        a
+    }
+    let (mut unique, mut non_manifold, mut i) = (0i64, 0, 0);
+    while i < edges.len() {
+        let mut j = i + 1;
+        while j < edges.len() && edges[j].0 == edges[i].0 && edges[j].1 == edges[i].1 {
+            let (a, b) = (find(&mut parent, edges[i].2), find(&mut parent, edges[j].2));
+            parent[a as usize] = b;
+            j += 1;
+        }
+        unique += 1;
+        non_manifold += (j - i > 2) as usize;
+        i = j;
+    }
+    let components = (0..m.triangles.len() as u32).filter(|&t| find(&mut parent, t) == t).count();
+    (components, non_manifold, m.positions.len() as i64 - unique + m.triangles.len() as i64)
+}
+
+/// Mean and max distance from the mesh vertices to the exact surface, in spacings.
+pub fn accuracy(m: &ReconMesh, vs: f32) -> (f32, f32) {
+    let d: Vec<f32> = m.positions.par_iter().map(|p| sdf(*p).abs() / vs).collect();
+    (d.iter().sum::<f32>() / d.len().max(1) as f32, d.iter().cloned().fold(0.0, f32::max))
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let method = args.first().cloned().unwrap_or_else(|| "all".into());
+    let get = |key: &str| -> Option<f64> {
+        args.iter().find_map(|a| a.strip_prefix(&format!("{key}=")).and_then(|v| v.parse().ok()))
+    };
+    if method == "all" {
+        let exe = std::env::current_exe().unwrap();
+        for m in ["apss", "poisson"] {
+            let status = std::process::Command::new(&exe).arg(m).args(&args[args.len().min(1)..]).status();
+            if !matches!(status, Ok(s) if s.success()) {
+                eprintln!("{m}: failed ({status:?})");
+            }
+        }
+        return;
+    }
+    let res = get("res").unwrap_or(256.0) as i32;
+    let t = Instant::now();
+    let pts = sample(res);
+    let vs = pts.spacing;
+    println!(
+        "{method}: {} points (one per voxel at {res}^3), sampled in {:.2} s, {} rayon threads",
+        pts.positions.len(),
+        t.elapsed().as_secs_f64(),
+        rayon::current_num_threads()
+    );
+    let rss0 = peak_rss_mib();
+    let cpu0 = cpu_seconds();
+    let t = Instant::now();
+    let mesh = match method.as_str() {
+        "apss" => {
+            let mut o = ApssOptions::default();
+            o.resolution = get("resolution").map_or(o.resolution, |v| v as u32);
+            o.radius = get("radius").map_or(o.radius, |v| v as f32);
+            o.band = get("band").map_or(o.band, |v| v as f32);
+            apss(&pts, &o).unwrap()
+        }
+        "poisson" => {
+            let mut o = PoissonOptions::default();
+            o.sm_distance = get("sm_distance").unwrap_or(o.sm_distance);
+            o.sm_radius = get("sm_radius").unwrap_or(o.sm_radius);
+            o.sm_angle = get("sm_angle").unwrap_or(o.sm_angle);
+            o.solver_tolerance = get("tol").unwrap_or(o.solver_tolerance);
+            o.resolution = get("resolution").map_or(o.resolution, |v| v as u32);
+            if args.iter().any(|a| a == "mesher=cgal") {
+                o.mesher = shapeshifter::recon::PoissonMesher::Cgal;
+            }
+            let (m, r) = poisson_report(&pts, &o).unwrap();
+            println!("  {o:?}");
+            println!(
+                "  CPU s: setup {:.2}, refine+assemble {:.2}, solve {:.2} ({} CG iterations, error {:.1e}, {} unknowns), mesher/grid {:.2} ({} corners), output {:.2}",
+                r.seconds_setup, r.seconds_refine, r.seconds_solve, r.solver_iterations, r.solver_error,
+                r.delaunay_vertices.saturating_sub(1), r.seconds_mesh, r.grid_corners, r.seconds_output
+            );
+            m
+        }
+        other => panic!("unknown method {other}"),
+    };
+    let secs = t.elapsed().as_secs_f64();
+    let cpu = cpu_seconds() - cpu0;
+    let (mean, max) = accuracy(&mesh, vs);
+    let (components, non_manifold, euler) = topology(&mesh);
+    println!(
+        "  {method}: {:.2} s wall, {cpu:.2} s CPU, {} vertices, {} triangles, {} boundary edges, {components} component(s), {non_manifold} non-manifold edges, Euler characteristic {euler} (the shape is a topological sphere: 2), vertex-to-surface mean {mean:.3} / max {max:.3} spacings, peak RSS {:.0} MiB (points alone {:.0} MiB)",
+        secs,
+        mesh.positions.len(),
+        mesh.triangles.len(),
+        mesh.boundary_edge_count(),
+        peak_rss_mib(),
+        rss0
+    );
+}
