@@ -93,3 +93,53 @@ fn fandisk_corners_stay_sharp_with_qem() {
         }
     }
 }
+
+/// Vertex colours reach the encoded points: every finest-level colour is
+/// close to the colour of the nearest mesh vertex.
+#[test]
+fn airplane_vertex_colours_land_on_the_points() {
+    let Some(path) = shared_data("pymeshlab/colored_airplane.ply") else {
+        eprintln!("skipping: ../shared/data/pymeshlab/colored_airplane.ply is absent");
+        return;
+    };
+    let mesh = mesh::load(&path).expect("airplane loads");
+    let shapeshifter::mesh::MeshColours::PerVertex(vc) = &mesh.colours else { panic!("airplane has no vertex colours") };
+    let options = EncodeOptions { sampling_resolution: 256, finest_resolution: 64, ..Default::default() };
+    let (levels, _) = encode(&mesh, &options).unwrap();
+    let fine = levels.last().unwrap();
+    let mut total = 0.0f64;
+    for i in 0..fine.len() {
+        let p = fine.point_world(i).as_vec3();
+        let nearest = (0..mesh.positions.len())
+            .min_by(|&a, &b| (mesh.positions[a] - p).length_squared().total_cmp(&(mesh.positions[b] - p).length_squared()))
+            .unwrap();
+        total += (fine.colours[i] - vc[nearest]).abs().max_element() as f64;
+    }
+    let mean = total / fine.len() as f64;
+    assert!(mean < 0.1, "mean colour error {mean} against the nearest vertex");
+}
+
+/// An open height field encodes as one sheet: its normals agree with the
+/// terrain's up direction (a closing surface would add a bottom facing down).
+#[test]
+fn three_peaks_stays_open() {
+    let Some(path) = shared_data("cgal/three_peaks.off") else {
+        eprintln!("skipping: ../shared/data/cgal/three_peaks.off is absent");
+        return;
+    };
+    let mesh = mesh::load(&path).expect("three_peaks loads");
+    let up: Vec3 = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            (b - a).cross(c - a)
+        })
+        .sum::<Vec3>()
+        .normalize();
+    let options = EncodeOptions { sampling_resolution: 256, finest_resolution: 64, ..Default::default() };
+    let (levels, _) = encode(&mesh, &options).unwrap();
+    let fine = levels.last().unwrap();
+    let facing_up = fine.normals.iter().filter(|n| n.dot(up) > 0.0).count();
+    assert!(facing_up as f64 > 0.97 * fine.len() as f64, "{facing_up} of {} normals face up", fine.len());
+}
