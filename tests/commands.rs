@@ -101,3 +101,31 @@ fn edit_copies_and_deletes_boxes() {
     assert_clean_failure(&o, "level_1.vdb", "grid");
     assert!(!oob.exists());
 }
+
+#[test]
+fn batch_run_skips_a_corrupt_input_and_fails_overall() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = small_tower_ply(dir.path());
+    let good2 = dir.path().join("tower2.ply");
+    std::fs::copy(&good, &good2).unwrap();
+    let corrupt = dir.path().join("corrupt.obj");
+    std::fs::write(&corrupt, [0xffu8, 0x00, 0x13].repeat(40)).unwrap();
+    let out = dir.path().join("batch");
+    let tiny = [
+        "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
+        "--set", "train.level0_iterations=3", "--set", "train.upper_iterations=2", "--set", "train.upsampler_iterations=2",
+    ];
+    let mut args = vec!["run", good.to_str().unwrap(), corrupt.to_str().unwrap(), good2.to_str().unwrap(), "-o", out.to_str().unwrap(), "-n", "1"];
+    args.extend(tiny);
+    let o = shapeshifter(&args);
+    assert!(!o.status.success(), "a failed input must fail the batch");
+    let err = stderr(&o);
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(errors.len(), 1, "one error line for the corrupt input: {err}");
+    assert!(errors[0].contains("corrupt.obj"), "{}", errors[0]);
+    for stem in ["tower", "tower2"] {
+        assert!(out.join(stem).join("variants/variant_000/level_0.vdb").is_file(), "{stem} has no result: {err}");
+        assert!(out.join(stem).join("eval.json").is_file());
+    }
+    assert!(!out.join("corrupt").join("eval.json").exists());
+}
