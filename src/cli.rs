@@ -510,15 +510,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Sample { dir, output, models, n, seed, extent, stop_level, from, preview, overrides, device: dev } => {
             let models = models.unwrap_or_else(|| dir.join("models"));
-            let mut config = Config::read(&models.join("config.toml"))?;
-            if !overrides.is_empty() {
-                // Re-resolve from the recorded configuration with the overrides.
-                let tmp = std::env::temp_dir().join(format!("shapeshifter_config_{}.toml", std::process::id()));
-                std::fs::write(&tmp, config.to_toml())?;
-                let r = Config::load(tmp.to_str().unwrap_or_default(), &overrides);
-                let _ = std::fs::remove_file(&tmp);
-                config = r?;
-            }
+            let config = Config::read(&models.join("config.toml"))?.with_overrides(&overrides)?;
             let device = device(&dev)?;
             let (manifest, levels) = dataset::read(&dir)?;
             let ext = edit::parse_vec3(&extent).ok_or_else(|| anyhow::anyhow!("--extent '{extent}': expected X,Y,Z"))?;

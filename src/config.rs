@@ -99,8 +99,19 @@ impl Config {
                 std::fs::read_to_string(p).map_err(|e| Error::file(p, e.to_string()))?
             }
         };
-        let mut table: toml::Table =
+        let table: toml::Table =
             toml::from_str(&text).map_err(|e| Error::Invalid(format!("profile '{profile}': {}", one_line(&e))))?;
+        Self::from_table(table, overrides)
+    }
+
+    /// This configuration with `overrides` applied (e.g. sampling settings on
+    /// top of the configuration recorded at training time).
+    pub fn with_overrides(&self, overrides: &[String]) -> Result<Config> {
+        let table: toml::Table = toml::from_str(&self.to_toml()).expect("a config reads back");
+        Self::from_table(table, overrides)
+    }
+
+    fn from_table(mut table: toml::Table, overrides: &[String]) -> Result<Config> {
         for o in overrides {
             apply_override(&mut table, o)?;
         }
@@ -264,6 +275,16 @@ mod tests {
         assert!(Config::load("cpu", &["sample.sampler=euler".into()]).is_err());
         assert!(Config::load("cpu", &["encode.finest_resolution=100".into()]).is_err());
         assert!(Config::load("nonexistent", &[]).is_err());
+    }
+
+    #[test]
+    fn overrides_on_a_recorded_config() {
+        let a = Config::load("cpu", &["train.crop=17".into()]).unwrap();
+        let b = a.with_overrides(&["sample.sampler=ddpm".into()]).unwrap();
+        assert_eq!(b.train.crop, 17, "recorded values are kept");
+        assert_eq!(b.sample.sampler, "ddpm");
+        assert_eq!(a.with_overrides(&[]).unwrap(), a);
+        assert!(a.with_overrides(&["sample.sampler=euler".into()]).is_err());
     }
 
     #[test]

@@ -83,11 +83,10 @@ pub fn evaluate(
     if variants.is_empty() {
         return Err(Error::Invalid("no variants to evaluate".into()));
     }
-    let (manifest, levels) = dataset::read(exemplar_dir)?;
+    let (_, levels) = dataset::read(exemplar_dir)?;
     let (Some(ex_coarse), Some(ex_fine)) = (levels.first(), levels.last()) else {
         return Err(Error::file(exemplar_dir, "manifest lists no levels"));
     };
-    let _ = manifest;
     let mode = match exemplar_mesh {
         Some(_) if variants.iter().all(|v| v.mesh.is_some()) => Voxelisation::Solid,
         _ => Voxelisation::Surface,

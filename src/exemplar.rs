@@ -11,6 +11,7 @@
 use glam::Vec3;
 
 use crate::mesh::{Mesh, MeshColours};
+use crate::rng::Rng;
 
 /// Dimensions of the demo tower, metres.
 #[derive(Clone, Copy, Debug)]
@@ -39,25 +40,9 @@ impl Default for TowerParams {
     }
 }
 
-/// SplitMix64: a tiny deterministic generator, so the exemplar is identical on
-/// every machine and version of every dependency.
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
+/// Uniform in [lo, hi) from the top 24 bits (f32 precision).
+fn range(rng: &mut Rng, lo: f32, hi: f32) -> f32 {
+    lo + (hi - lo) * ((rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32)
 }
 
 /// Collects boxes (stones) into one triangle soup with per-vertex colours.
@@ -143,10 +128,10 @@ fn in_opening(a: f32, course: u32) -> bool {
 
 /// Stone colour: warm sandstone with per-stone variation, a few darker and a
 /// few greener (weathered) stones.
-fn stone_colour(rng: &mut SplitMix) -> Vec3 {
+fn stone_colour(rng: &mut Rng) -> Vec3 {
     let base = Vec3::new(0.72, 0.62, 0.48);
-    let shade = rng.range(0.75, 1.15);
-    let kind = rng.unit();
+    let shade = range(rng, 0.75, 1.15);
+    let kind = range(rng, 0.0, 1.0);
     let tint = if kind < 0.12 {
         Vec3::new(0.80, 0.85, 0.70) // weathered, greenish
     } else if kind < 0.25 {
@@ -160,7 +145,7 @@ fn stone_colour(rng: &mut SplitMix) -> Vec3 {
 /// Builds the demo tower. Deterministic for given parameters.
 pub fn ruined_tower(params: &TowerParams) -> Mesh {
     let p = *params;
-    let mut rng = SplitMix(p.seed);
+    let mut rng = Rng::new(p.seed);
     let mut b = Builder::default();
     let tau = std::f32::consts::TAU;
     let r_in = p.outer_radius - p.wall_thickness;
@@ -192,8 +177,8 @@ pub fn ruined_tower(params: &TowerParams) -> Mesh {
             // Stones vary in length: each joint is jittered by a generator
             // seeded with its own index, so both neighbours agree on it.
             let joint = |k: u32| -> f32 {
-                let mut r = SplitMix(p.seed ^ ((course as u64) << 32) ^ k as u64);
-                tau * (k as f32 + shift + r.range(-0.18, 0.18)) / p.stones_per_course as f32
+                let mut r = Rng::new(p.seed ^ ((course as u64) << 32) ^ k as u64);
+                tau * (k as f32 + shift + range(&mut r, -0.18, 0.18)) / p.stones_per_course as f32
             };
             let (a0, a1) = (joint(s), joint(s + 1));
             let mid = 0.5 * (a0 + a1);
@@ -202,7 +187,7 @@ pub fn ruined_tower(params: &TowerParams) -> Mesh {
             }
             let gap_a = p.gap / p.outer_radius;
             // Stones stick out by a few centimetres, by stone: a rough face.
-            let out = p.outer_radius + rng.range(-0.02, 0.03);
+            let out = p.outer_radius + range(&mut rng, -0.02, 0.03);
             let c = stone_colour(&mut rng);
             b.add_stone(r_in, out, a0 + gap_a / 2.0, a1 - gap_a / 2.0, y0, y1, c);
         }

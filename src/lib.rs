@@ -23,6 +23,7 @@ pub mod pipeline;
 pub mod metrics;
 pub mod recon;
 pub mod render;
+pub mod rng;
 pub mod sample;
 pub mod sparse_conv;
 pub mod train;

@@ -39,6 +39,7 @@ use rayon::prelude::*;
 
 use crate::level::{Frame, Level};
 use crate::mesh::Mesh;
+use crate::rng::Rng;
 
 // ---------------------------------------------------------------------------
 // Lattice and occupancy
@@ -1001,9 +1002,9 @@ pub fn local_patch_scores(variant: &Occupancy, exemplar: &ExemplarPatches, param
         return zero;
     }
     if centres.len() > params.max_patches {
-        let mut rng = SplitMix64(params.seed);
+        let mut rng = Rng::new(params.seed);
         for i in 0..params.max_patches {
-            let j = i + (rng.next() % (centres.len() - i) as u64) as usize;
+            let j = i + (rng.next_u64() % (centres.len() - i) as u64) as usize;
             centres.swap(i, j);
         }
         centres.truncate(params.max_patches);
@@ -1169,18 +1170,6 @@ fn match_group(a: &[Patch], sa: &[Sig], b: &ExemplarPatches, best: &mut [Best]) 
     }
 }
 
-/// Small deterministic generator for the patch sampling.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-}
 
 // ---------------------------------------------------------------------------
 // Point-set distances
@@ -1621,11 +1610,11 @@ mod tests {
     #[test]
     fn morphology_matches_brute_force() {
         let mut occ = Occupancy::empty([70, 9, 7]);
-        let mut rng = SplitMix64(7);
+        let mut rng = Rng::new(7);
         for z in 0..7 {
             for y in 0..9 {
                 for x in 0..70 {
-                    if rng.next() % 3 >= 1 {
+                    if rng.next_u64() % 3 >= 1 {
                         occ.set(x, y, z);
                     }
                 }
@@ -1665,9 +1654,9 @@ mod tests {
     #[test]
     fn patch_extraction_matches_get() {
         let mut occ = Occupancy::empty([70, 20, 20]);
-        let mut rng = SplitMix64(3);
+        let mut rng = Rng::new(3);
         for v in 0..70 * 20 * 20 {
-            if rng.next() & 1 == 0 {
+            if rng.next_u64() & 1 == 0 {
                 occ.set(v % 70, (v / 70) % 20, v / 1400);
             }
         }
@@ -1741,11 +1730,11 @@ mod tests {
 
         // Random voxels in the same box: no plausible patches.
         let mut noise = Occupancy::empty(grid.dims);
-        let mut rng = SplitMix64(99);
+        let mut rng = Rng::new(99);
         for z in 20..76 {
             for y in 20..76 {
                 for x in 15..85 {
-                    if rng.next() % 10 < 3 {
+                    if rng.next_u64() % 10 < 3 {
                         noise.set(x, y, z);
                     }
                 }
@@ -1795,14 +1784,14 @@ mod tests {
         let expect = 0.5 * (81.0 / 2001.0);
         assert!((chamfer(&pts, &extra) as f64 - expect).abs() < 1e-5);
         // Brute force agreement on random points.
-        let mut rng = SplitMix64(5);
+        let mut rng = Rng::new(5);
         let mut rnd = |n: usize| -> Vec<Vec3> {
             (0..n)
                 .map(|_| {
                     Vec3::new(
-                        rng.next() as f32 / u64::MAX as f32,
-                        rng.next() as f32 / u64::MAX as f32,
-                        rng.next() as f32 / u64::MAX as f32,
+                        rng.next_u64() as f32 / u64::MAX as f32,
+                        rng.next_u64() as f32 / u64::MAX as f32,
+                        rng.next_u64() as f32 / u64::MAX as f32,
                     )
                 })
                 .collect()
@@ -1878,16 +1867,16 @@ mod tests {
             }
         }
         // Variants: random voxels, and the exemplar with voxels removed.
-        let mut rng = SplitMix64(1);
+        let mut rng = Rng::new(1);
         let mut noise = Occupancy::empty([64, 64, 64]);
         let mut damaged = ex.clone();
         for z in 10..54 {
             for y in 10..54 {
                 for x in 10..54 {
-                    if rng.next() % 10 < 3 {
+                    if rng.next_u64() % 10 < 3 {
                         noise.set(x, y, z);
                     }
-                    if rng.next() % 10 < 1 && ex.get(x, y, z) {
+                    if rng.next_u64() % 10 < 1 && ex.get(x, y, z) {
                         let w = damaged.words_per_row();
                         let r = (y + 64 * z) as usize;
                         damaged.bits[r * w + x as usize / 64] &= !(1u64 << (x % 64));

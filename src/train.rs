@@ -38,6 +38,7 @@ use serde::{Deserialize, Serialize};
 use tch::{nn::OptimizerConfig, Device, Kind, Tensor};
 
 use crate::config::Config;
+use crate::rng::Rng;
 use crate::diffusion::noise_to_rows;
 use crate::error::{write_atomically, Error, Result};
 use crate::level::{Channel, Level};
@@ -625,29 +626,6 @@ pub(crate) fn mix_seed(seed: u64, level: u64, phase: u64, step: u64) -> u64 {
         h = Rng::new(h ^ v.wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64();
     }
     h >> 1 // non-negative as i64
-}
-
-/// A small deterministic generator (SplitMix64) for crops and times.
-pub(crate) struct Rng(u64);
-
-impl Rng {
-    pub(crate) fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-    pub(crate) fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub(crate) fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    pub(crate) fn below(&mut self, n: usize) -> usize {
-        (self.uniform() * n as f64) as usize % n.max(1)
-    }
 }
 
 /// Procedural exemplars for tests and benchmarks (no mesh needed).
