@@ -351,7 +351,41 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
   if (4.0 * radius / cell > double(1 << 19))
     throw std::runtime_error("poisson: grid_cell " + std::to_string(cell) +
                              " is too small for a shape of radius " + std::to_string(radius));
+  // 3a'. The domain: the points' bounding box plus a margin (a tenth of its
+  //      longest side, at least 4 cells). Around an open sheet the zero set
+  //      wraps round in a bubble that runs out to the triangulation's hull
+  //      (tens of millions of corners, minutes); clipped to the domain, and
+  //      with the domain's faces held outside (f > 0), it is closed by a cap
+  //      one margin away. A closed shape's zero set lies well inside it.
+  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  for (std::size_t i = 0; i + 2 < points.size(); i += 3)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], double(points[i + a]));
+      hi[a] = std::max(hi[a], double(points[i + a]));
+    }
+  const double margin =
+      std::max(0.1 * std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}), 4.0 * cell);
+  int domain[6];  // corner index range, inclusive
+  for (int a = 0; a < 3; ++a) {
+    domain[a] = int(std::floor((lo[a] - margin - origin[a]) / cell));
+    domain[3 + a] = int(std::ceil((hi[a] + margin - origin[a]) / cell));
+  }
+  auto on_domain_face = [&](int x, int y, int z) {
+    return x <= domain[0] || y <= domain[1] || z <= domain[2] || x >= domain[3] ||
+           y >= domain[4] || z >= domain[5];
+  };
   std::vector<std::array<int, 6>> boxes;  // corner ranges, inclusive
+  // Two layers along every face: the face (held outside) and the one inside
+  // it, so that the cap's cells have all their corners.
+  for (int a = 0; a < 3; ++a)
+    for (int side = 0; side < 2; ++side) {
+      std::array<int, 6> box;
+      std::copy(domain, domain + 6, box.begin());
+      if (side == 0) box[3 + a] = domain[a] + 1;
+      else box[a] = domain[3 + a] - 1;
+      boxes.push_back(box);
+    }
+  const std::size_t face_boxes = boxes.size();
   for (auto c = tr.finite_cells_begin(); c != tr.finite_cells_end(); ++c) {
     double f[4];
     bool neg = false, pos = false;
@@ -377,10 +411,13 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
     for (int a = 0; a < 3; ++a) {
       box[a] = int(std::floor((mn[a] - origin[a]) / cell)) - 1;
       box[3 + a] = int(std::floor((mx[a] - origin[a]) / cell)) + 2;
+      box[a] = std::max(box[a], domain[a]);
+      box[3 + a] = std::min(box[3 + a], domain[3 + a]);
     }
+    if (box[0] > box[3] || box[1] > box[4] || box[2] > box[5]) continue;
     boxes.push_back(box);
   }
-  if (boxes.empty()) throw std::runtime_error("poisson: the implicit function has no zero set");
+  if (boxes.size() == face_boxes) throw std::runtime_error("poisson: the implicit function has no zero set");
   std::vector<uint64_t> keys;
   for (const auto &box : boxes)
     for (int x = floor_div(box[0], kBrick); x <= floor_div(box[3], kBrick); ++x)
@@ -427,10 +464,17 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
                             for (int z = 0; z < kBrick; ++z) {
                               const int i = (x * kBrick + y) * kBrick + z;
                               if (!marked[b].test(i)) continue;
-                              const Point p(origin[0] + (bricks[b][0] * kBrick + x) * cell,
-                                            origin[1] + (bricks[b][1] * kBrick + y) * cell,
-                                            origin[2] + (bricks[b][2] * kBrick + z) * cell);
-                              v[i] = float(f(p));
+                              const int gx = bricks[b][0] * kBrick + x,
+                                        gy = bricks[b][1] * kBrick + y,
+                                        gz = bricks[b][2] * kBrick + z;
+                              const Point p(origin[0] + gx * cell, origin[1] + gy * cell,
+                                            origin[2] + gz * cell);
+                              const float value = float(f(p));
+                              // Held outside on the domain's faces; |f| puts
+                              // the cap halfway to an inside neighbour.
+                              v[i] = on_domain_face(gx, gy, gz)
+                                         ? std::max(std::abs(value), 1e-6f)
+                                         : value;
                             }
                       }
                     });

@@ -1,21 +1,28 @@
 //! Sparse convolution throughput against a plain matmul of the same arithmetic.
 //!
-//! One SubmConv3d 3^3 layer (C -> C, bias) on a spherical shell at 64^3 and 128^3
-//! and on a dense 41^3 box, 64 and 128 channels: forward (under `tch::no_grad`) and
+//! One SubmConv3d 3^3 layer (C -> C, bias) on the encoded ruined tower's 64^3 and
+//! 128^3 levels, on the fullest 41^3 crop of its 128^3 level (a training crop) and on a
+//! dense 41^3 box (the worst case: every neighbour present), 64 and 128 channels;
+//! synthetic spherical shells of the same resolutions stand in where
+//! ../shared/data/towerruins is absent. Forward (under `tch::no_grad`) and
 //! forward + backward (input, weight and bias gradients), median of 7 runs, each
 //! beside `[N*27, C] x [C, C]` matmuls measured in the same run:
 //! ratio = matmul time / our time (1.0 = as fast as the bare GEMM; fwd+bwd is compared
 //! with three matmuls: forward, input gradient, weight gradient).
-//! Then kernel-map construction (k = 3, 5) on a ~1.8M-voxel shell.
+//! Then kernel-map construction (k = 3, 5) on the tower's 256^3 level and on a
+//! ~1.8M-voxel shell.
 //!
-//! `cargo run --release --example conv_bench [-- --no-tune] [-- --quick] [-- --maps-only]`
+//! `cargo run --release --example conv_bench [-- --no-tune] [-- --quick] [-- --maps-only]
+//!  [-- --mesh PATH]`
 //! Env `SPARSE_CHUNK_BYTES` overrides the CPU im2col block size.
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{IVec3, Vec3};
+use shapeshifter::encode::{encode, EncodeOptions};
 use shapeshifter::grid::SparseGrid;
+use shapeshifter::mesh;
 use shapeshifter::sparse_conv::{set_cpu_chunk_bytes, tune_malloc, SparseTensor, SubmConv3d};
 use tch::{nn::VarStore, Device, Kind, Tensor};
 
@@ -33,6 +40,19 @@ fn shell(res: i32, radius: f32, thickness: f32) -> Vec<IVec3> {
         }
     }
     v
+}
+
+/// The `size`^3 box (a training crop) around one of a sample of the voxels that holds
+/// the most voxels.
+fn fullest_crop(coords: &[IVec3], size: i32) -> Vec<IVec3> {
+    let grid = SparseGrid::from_coords(512, coords).unwrap();
+    let step = (coords.len() / 200).max(1);
+    let best = (0..coords.len())
+        .step_by(step)
+        .map(|i| grid.crop(coords[i], 0, size).0)
+        .max_by_key(|g| g.len())
+        .unwrap();
+    best.coords()
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -59,21 +79,46 @@ fn main() {
     );
 
     let maps_only = args.iter().any(|a| a == "--maps-only");
-    let cases: Vec<(String, Vec<IVec3>)> = if maps_only { vec![] } else { vec![
-        ("shell 64^3".into(), shell(64, 0.45 * 64.0, 2.0)),
-        ("shell 128^3".into(), shell(128, 0.45 * 128.0, 2.0)),
-        ("dense 41^3".into(), {
-            let mut v = Vec::new();
-            for x in 0..41 {
-                for y in 0..41 {
-                    for z in 0..41 {
-                        v.push(IVec3::new(x, y, z));
-                    }
+    let mesh_path = args
+        .iter()
+        .position(|a| a == "--mesh")
+        .and_then(|i| args.get(i + 1).cloned())
+        .unwrap_or_else(|| "../shared/data/towerruins/towerruins.obj".into());
+    // The exemplar's own levels (paper settings: 1024 sampling, 16..256), coordinates only.
+    let levels: Option<Vec<Vec<IVec3>>> = if std::path::Path::new(&mesh_path).exists() {
+        let m = mesh::load(std::path::Path::new(&mesh_path)).expect("load the benchmark mesh");
+        let (levels, _) = encode(&m, &EncodeOptions::default()).expect("encode");
+        println!("{mesh_path}: levels {:?}", levels.iter().map(|l| (l.resolution, l.len())).collect::<Vec<_>>());
+        Some(levels.into_iter().map(|l| l.coords).collect())
+    } else {
+        println!("{mesh_path} absent: synthetic shells of the same resolutions instead");
+        None
+    };
+    let dense41 = || {
+        let mut v = Vec::new();
+        for x in 0..41 {
+            for y in 0..41 {
+                for z in 0..41 {
+                    v.push(IVec3::new(x, y, z));
                 }
             }
-            v
-        }),
-    ] };
+        }
+        v
+    };
+    let cases: Vec<(String, Vec<IVec3>)> = match (&levels, maps_only) {
+        (_, true) => vec![],
+        (Some(levels), false) => vec![
+            ("tower 64^3".into(), levels[2].clone()),
+            ("tower 128^3".into(), levels[3].clone()),
+            ("tower 41^3 crop".into(), fullest_crop(&levels[3], 41)),
+            ("dense 41^3".into(), dense41()),
+        ],
+        (None, false) => vec![
+            ("shell 64^3".into(), shell(64, 0.45 * 64.0, 2.0)),
+            ("shell 128^3".into(), shell(128, 0.45 * 128.0, 2.0)),
+            ("dense 41^3".into(), dense41()),
+        ],
+    };
     println!(
         "\n{:<12} {:>7} {:>4} | {:>9} {:>9} {:>6} | {:>9} {:>9} {:>6} | {:>8}",
         "grid", "N", "C", "fwd ms", "mm ms", "ratio", "fwd+bwd", "3 mm ms", "ratio", "GFLOP/s"
@@ -135,7 +180,7 @@ fn main() {
             let (t_mm, t_fwd, t_3mm, t_fb) = (median(t_mm), median(t_fwd), median(t_3mm), median(t_fb));
             let flops = 2.0 * (n * 27 * c * c) as f64;
             println!(
-                "{:<12} {:>7} {:>4} | {:>9.2} {:>9.2} {:>6.2} | {:>9.2} {:>9.2} {:>6.2} | {:>8.1}",
+                "{:<15} {:>7} {:>4} | {:>9.2} {:>9.2} {:>6.2} | {:>9.2} {:>9.2} {:>6.2} | {:>8.1}",
                 name,
                 n,
                 c,
@@ -148,7 +193,24 @@ fn main() {
                 flops / t_fwd / 1e9
             );
         }
-        println!("{:<12} kernel map k=3 (first use): {:.1} ms", "", t_map * 1e3);
+        println!("{:<15} kernel map k=3 (first use): {:.1} ms", "", t_map * 1e3);
+    }
+
+    // Kernel maps on the finest level the method uses (a fresh grid each time: no cache).
+    if let Some(levels) = &levels {
+        let finest = &levels[levels.len() - 1];
+        println!("\nkernel maps on the tower's finest level ({} voxels):", finest.len());
+        for k in [3usize, 5] {
+            let mut tk = vec![];
+            for _ in 0..5 {
+                let g = SparseGrid::from_coords(512, finest).unwrap();
+                let t = Instant::now();
+                let m = g.kernel_map(k).unwrap();
+                tk.push(t.elapsed().as_secs_f64());
+                assert_eq!(m.rows(), g.len());
+            }
+            println!("  kernel map k={k} (median of 5): {:8.1} ms", median(tk) * 1e3);
+        }
     }
 
     // Kernel maps on a ~1.8M-voxel shell.

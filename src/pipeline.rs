@@ -242,6 +242,9 @@ pub fn mesh_level(
     use crate::recon::{self, ApssOptions, Method, PoissonOptions};
     let method = method.unwrap_or(if exemplar_open { Method::Apss } else { Method::Poisson });
     let points = oriented_points(level);
+    if points.positions.is_empty() {
+        return Err(Error::Invalid("the level has no active voxels (mask > 0) to mesh".into()));
+    }
     let poisson = PoissonOptions { resolution, ..Default::default() };
     let apss = ApssOptions { resolution, ..Default::default() };
     let m = recon::reconstruct(&points, method, &poisson, &apss).map_err(|e| Error::Invalid(e.to_string()))?;

@@ -42,7 +42,7 @@ mod spatial;
 mod tests;
 
 use glam::Vec3;
-use spatial::HashGrid;
+use spatial::{HashGrid, Nearest};
 use std::str::FromStr;
 use std::time::Instant;
 
@@ -320,8 +320,7 @@ pub fn poisson_report(
     if triangles.is_empty() {
         return Err(ReconError::Failed("the Poisson surface is empty".into()));
     }
-    let cell = if stats.spacing > 0.0 { stats.spacing as f32 } else { spacing };
-    let colours = transfer_colours(points, &mesh_positions, cell);
+    let colours = transfer_colours(points, &mesh_positions);
     let s = &stats;
     let report = PoissonReport {
         spacing: s.spacing,
@@ -381,7 +380,7 @@ pub fn apss(points: &OrientedPoints, options: &ApssOptions) -> Result<ReconMesh,
     if triangles.is_empty() {
         return Err(ReconError::Failed("the APSS field has no zero crossing near the points".into()));
     }
-    let colours = transfer_colours(points, &positions, spacing);
+    let colours = transfer_colours(points, &positions);
     Ok(ReconMesh { positions, triangles, colours })
 }
 
@@ -445,13 +444,12 @@ fn estimate_spacing(p: &[Vec3]) -> f32 {
 }
 
 /// Colour of the nearest input point for every vertex (empty without colours).
-fn transfer_colours(points: &OrientedPoints, vertices: &[Vec3], cell: f32) -> Vec<Vec3> {
+fn transfer_colours(points: &OrientedPoints, vertices: &[Vec3]) -> Vec<Vec3> {
     use rayon::prelude::*;
     if points.colours.is_empty() {
         return Vec::new();
     }
-    let cell = if cell > 0.0 && cell.is_finite() { 2.0 * cell } else { estimate_spacing(&points.positions) * 2.0 };
-    let grid = HashGrid::new(&points.positions, cell);
+    let grid = Nearest::new(&points.positions);
     vertices
         .par_iter()
         .map(|v| grid.nearest(*v).map_or(Vec3::ZERO, |(i, _)| points.colours[i as usize]))

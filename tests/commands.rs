@@ -129,3 +129,77 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     }
     assert!(!out.join("corrupt").join("eval.json").exists());
 }
+
+/// A level of `n` voxels on a small sphere (points on the surface, outward normals).
+fn sphere_level(n: usize) -> shapeshifter::level::Level {
+    use glam::{IVec3, Vec3};
+    let mut level = shapeshifter::level::Level { index: 2, resolution: 64, ..Default::default() };
+    let mut seen = std::collections::HashSet::new();
+    for i in 0..n * 4 {
+        // Fibonacci sphere, radius 20 voxels.
+        let y = 1.0 - 2.0 * (i as f32 + 0.5) / (n * 4) as f32;
+        let phi = i as f32 * 2.399_963;
+        let r = (1.0 - y * y).sqrt();
+        let d = Vec3::new(r * phi.cos(), y, r * phi.sin());
+        let p = d * 20.0;
+        let c = p.round().as_ivec3();
+        if level.len() < n && seen.insert(c) {
+            level.coords.push(c + IVec3::splat(32));
+            level.offsets.push((p - c.as_vec3()).clamp(Vec3::splat(-0.5), Vec3::splat(0.5)));
+            level.normals.push(d);
+            level.colours.push(Vec3::new(0.8, 0.5, 0.2));
+            level.mask.push(1.0);
+        }
+    }
+    level
+}
+
+#[test]
+fn mesh_and_points_bad_levels_fail_cleanly_with_no_output() {
+    use shapeshifter::vdb::{write_level, Provenance, WriteOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, level: &shapeshifter::level::Level| {
+        let p = dir.path().join(name);
+        write_level(&p, level, &Provenance::default(), WriteOptions::default()).unwrap();
+        p
+    };
+    let good = write("good.vdb", &sphere_level(2000));
+    let mut inactive = sphere_level(2000);
+    inactive.mask.iter_mut().for_each(|m| *m = -1.0);
+    let cases = [
+        (write("empty.vdb", &sphere_level(0)), "no active voxels"),
+        (write("inactive.vdb", &inactive), "no active voxels"),
+        (write("few.vdb", &sphere_level(5)), "too few"),
+        (
+            {
+                let mut l = sphere_level(2000);
+                l.normals[17] = glam::Vec3::NAN;
+                write("nan.vdb", &l)
+            },
+            "nan",
+        ),
+    ];
+    let before = listing(dir.path());
+    for (level, problem) in &cases {
+        let name = level.file_name().unwrap().to_str().unwrap();
+        for method in ["poisson", "apss"] {
+            let out = dir.path().join(format!("{name}.{method}.ply"));
+            let png = dir.path().join(format!("{name}.{method}.png"));
+            let o = shapeshifter(&[
+                "mesh", level.to_str().unwrap(), "-o", out.to_str().unwrap(), "--method", method,
+                "--preview", png.to_str().unwrap(),
+            ]);
+            assert_clean_failure(&o, name, problem);
+        }
+        if *problem != "too few" {
+            let out = dir.path().join(format!("{name}.points.ply"));
+            assert_clean_failure(&shapeshifter(&["points", level.to_str().unwrap(), "-o", out.to_str().unwrap()]), name, problem);
+        }
+    }
+    assert_eq!(listing(dir.path()), before, "a failed mesh/points run left files behind");
+    // The same command on a good level succeeds (so the failures above are the inputs').
+    let out = dir.path().join("good.ply");
+    let o = shapeshifter(&["mesh", good.to_str().unwrap(), "-o", out.to_str().unwrap(), "--method", "apss", "--resolution", "64"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(mesh::load(&out).unwrap().triangles.len() > 100);
+}

@@ -1,4 +1,6 @@
-//! A uniform hash grid over points: radius queries and nearest-point queries.
+//! A uniform hash grid over points for radius queries, and a k-d tree (kiddo)
+//! for nearest-point queries, which must stay fast far from the points (the
+//! Poisson surface of an open sheet wraps around it at many cells' distance).
 //!
 //! Points are sorted by cell so that every occupied cell is one contiguous run
 //! of the sorted arrays; a query visits the cells around it and scans those runs.
@@ -51,7 +53,6 @@ pub(crate) fn unpack(k: u64) -> [i32; 3] {
 pub(crate) const KEY_LIMIT: i32 = (KEY_BIAS - 1) as i32;
 
 pub(crate) struct HashGrid {
-    cell: f32,
     inv_cell: f32,
     /// cell key -> (start, end) in the sorted arrays
     runs: KeyMap<(u32, u32)>,
@@ -59,9 +60,6 @@ pub(crate) struct HashGrid {
     pub(crate) index: Vec<u32>,
     /// positions, in sorted order
     pub(crate) pos: Vec<Vec3>,
-    /// occupied cell bounds (inclusive), to stop nearest searches
-    lo: [i32; 3],
-    hi: [i32; 3],
 }
 
 impl HashGrid {
@@ -76,23 +74,16 @@ impl HashGrid {
             .collect();
         keyed.par_sort_unstable();
         let mut runs = KeyMap::default();
-        let mut lo = [i32::MAX; 3];
-        let mut hi = [i32::MIN; 3];
         let mut start = 0usize;
         for i in 1..=keyed.len() {
             if i == keyed.len() || keyed[i].0 != keyed[start].0 {
                 runs.insert(keyed[start].0, (start as u32, i as u32));
-                let c = unpack(keyed[start].0);
-                for a in 0..3 {
-                    lo[a] = lo[a].min(c[a]);
-                    hi[a] = hi[a].max(c[a]);
-                }
                 start = i;
             }
         }
         let index: Vec<u32> = keyed.iter().map(|&(_, i)| i).collect();
         let pos = index.iter().map(|&i| points[i as usize]).collect();
-        HashGrid { cell, inv_cell, runs, index, pos, lo, hi }
+        HashGrid { inv_cell, runs, index, pos }
     }
 
     #[inline]
@@ -135,56 +126,28 @@ impl HashGrid {
             }
         }
     }
+}
 
-    /// The original index of the point nearest to `p`, and its distance.
+/// Nearest-point queries over a fixed point set.
+pub(crate) struct Nearest {
+    tree: kiddo::ImmutableKdTree<f32, 3>,
+    len: usize,
+}
+
+impl Nearest {
+    /// Points must be finite.
+    pub(crate) fn new(points: &[Vec3]) -> Self {
+        let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+        Nearest { tree: kiddo::ImmutableKdTree::new_from_slice(&coords), len: points.len() }
+    }
+
+    /// The index of the point nearest to `p`, and its distance (None without points).
     pub(crate) fn nearest(&self, p: Vec3) -> Option<(u32, f32)> {
-        if self.pos.is_empty() {
+        if self.len == 0 {
             return None;
         }
-        let c = self.cell_of(p);
-        let mut best = (u32::MAX, f32::INFINITY);
-        // Chebyshev shells of cells around c; a point in shell r is at least
-        // (r - 1) * cell away, so shell r + 1 cannot beat best once r * cell >= best.
-        let max_r = (0..3)
-            .map(|a| (c[a] - self.lo[a]).abs().max((c[a] - self.hi[a]).abs()))
-            .max()
-            .unwrap_or(0);
-        for r in 0..=max_r {
-            let mut visit = |x: i32, y: i32, z: i32| {
-                if let Some(&(s, e)) = self.runs.get(&pack([x, y, z])) {
-                    for j in s as usize..e as usize {
-                        let d2 = self.pos[j].distance_squared(p);
-                        if d2 < best.1 {
-                            best = (j as u32, d2);
-                        }
-                    }
-                }
-            };
-            if r == 0 {
-                visit(c[0], c[1], c[2]);
-            } else {
-                for x in c[0] - r..=c[0] + r {
-                    for y in c[1] - r..=c[1] + r {
-                        let on_side = x == c[0] - r || x == c[0] + r || y == c[1] - r || y == c[1] + r;
-                        if on_side {
-                            for z in c[2] - r..=c[2] + r {
-                                visit(x, y, z);
-                            }
-                        } else {
-                            visit(x, y, c[2] - r);
-                            visit(x, y, c[2] + r);
-                        }
-                    }
-                }
-            }
-            if best.0 != u32::MAX {
-                let reach = r as f32 * self.cell;
-                if reach * reach >= best.1 {
-                    break;
-                }
-            }
-        }
-        (best.0 != u32::MAX).then(|| (self.index[best.0 as usize], best.1.sqrt()))
+        let n = self.tree.nearest_one::<kiddo::SquaredEuclidean>(&p.to_array());
+        Some((n.item as u32, n.distance.sqrt()))
     }
 }
 

@@ -85,7 +85,7 @@ fn signed_volume(m: &ReconMesh) -> f32 {
 
 /// Largest distance from an input point to the nearest mesh vertex.
 fn coverage(points: &OrientedPoints, m: &ReconMesh) -> f32 {
-    let grid = HashGrid::new(&m.positions, VS);
+    let grid = Nearest::new(&m.positions);
     points.positions.iter().map(|p| grid.nearest(*p).unwrap().1).fold(0.0, f32::max)
 }
 
@@ -142,7 +142,7 @@ fn apss_patch_stays_open_without_skirt() {
     let boundary = m.boundary_edge_count();
     // The rim of a disk of radius R is about 2 pi R / cell edges long.
     assert!(boundary > 100, "only {boundary} boundary edges");
-    let grid = HashGrid::new(&pts.positions, VS);
+    let grid = Nearest::new(&pts.positions);
     for p in &m.positions {
         let d = grid.nearest(*p).unwrap().1;
         // cells are spacing / 4 here: a vertex lies within band + cell diagonal
