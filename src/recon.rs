@@ -11,8 +11,10 @@
 //!   points), with only a weak pull towards the points (0.1 on the diagonal
 //!   of the input vertices, where screened Poisson interpolates with point
 //!   weight 10), and its iso-value is the median of the function at the
-//!   points. It closes small holes, but NOT an open sheet: there the zero
-//!   set runs on to the hull of the triangulation and stops (see the tests).
+//!   points. It closes small holes; around an open sheet its zero set runs on
+//!   to the hull of the triangulation, so the grid mesher clips it to the
+//!   points' box plus a tenth of its longest side and caps it there (closed,
+//!   see the tests).
 //!   The zero set is meshed by surface nets on a sparse grid at `resolution`
 //!   (default 512, like marching cubes at the paper's depth 9), or by CGAL's
 //!   adaptive surface mesher ([`PoissonMesher::Cgal`]).

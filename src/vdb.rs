@@ -74,6 +74,11 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
         // Kept as a string: OpenVDB has no unsigned 64-bit metadata.
         meta.push(meta_str("shapeshifter_seed", &seed.to_string()));
     }
+    if let Some(i) = (0..level.len()).find(|&i| {
+        !(level.offsets[i].is_finite() && level.normals[i].is_finite() && level.colours[i].is_finite())
+    }) {
+        return Err(Error::file(path, format!("voxel {} has NaN or infinite features; not written", level.coords[i])));
+    }
     let flat = |v: &[Vec3]| -> Vec<f32> { v.iter().flat_map(|p| p.to_array()).collect() };
     let normals: Vec<Vec3> = level.normals.iter().map(|n| n.normalize_or_zero()).collect();
     let data = LevelData {
