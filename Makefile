@@ -20,8 +20,15 @@ demo: build
 test: setup
 	cargo test --release $(CARGO_FEATURES) -- --test-threads=2
 
+# Every benchmark of the README's performance table (the ruined tower from
+# ../shared/data where it is present; synthetic shapes stand in otherwise).
+TOWER := ../shared/data/towerruins/towerruins.obj
 bench: build
 	cargo run --release --example encode_bench
+	cargo run --release --example conv_bench
+	if [ -f $(TOWER) ]; then cargo run --release --example recon_bench -- all mesh=$(TOWER); \
+	else cargo run --release --example recon_bench; fi
+	cargo run --release --example metrics_bench
 
 clean:
 	cargo clean

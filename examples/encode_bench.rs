@@ -1,4 +1,5 @@
-//! Encodes a mesh (default: the ruined tower) several times at the paper's settings
+//! Encodes a mesh (default: the ruined tower of ../shared/data, or the embedded
+//! demo exemplar where that is absent) several times at the paper's settings
 //! and prints the median time of every stage and the voxel counts.
 //!
 //! Usage: encode_bench [MESH.obj] [RUNS] [qem|average]
@@ -36,7 +37,8 @@ fn cpu_seconds() -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("../shared/data/towerruins/towerruins.obj", |s| s.as_str());
+    let default = "../shared/data/towerruins/towerruins.obj";
+    let path = args.get(1).map_or(default, |s| s.as_str());
     let runs: usize = args.get(2).map_or(5, |s| s.parse().expect("RUNS"));
     let pooling = match args.get(3).map(String::as_str) {
         Some("average") => Pooling::Average,
@@ -44,6 +46,10 @@ fn main() {
     };
     let mesh = match mesh::load(Path::new(path)) {
         Ok(m) => m,
+        Err(_) if args.get(1).is_none() && !Path::new(default).exists() => {
+            println!("{default} absent: the embedded demo exemplar instead");
+            shapeshifter::exemplar::ruined_tower(&Default::default())
+        }
         Err(e) => {
             eprintln!("error: {e}");
             std::process::exit(1);
