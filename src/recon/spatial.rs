@@ -130,23 +130,20 @@ impl HashGrid {
 
 /// Nearest-point queries over a fixed point set.
 pub(crate) struct Nearest {
-    tree: kiddo::ImmutableKdTree<f32, 3>,
-    len: usize,
+    /// None for an empty set (kiddo wants at least one point).
+    tree: Option<kiddo::ImmutableKdTree<f32, 3>>,
 }
 
 impl Nearest {
     /// Points must be finite.
     pub(crate) fn new(points: &[Vec3]) -> Self {
         let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
-        Nearest { tree: kiddo::ImmutableKdTree::new_from_slice(&coords), len: points.len() }
+        Nearest { tree: (!coords.is_empty()).then(|| kiddo::ImmutableKdTree::new_from_slice(&coords)) }
     }
 
     /// The index of the point nearest to `p`, and its distance (None without points).
     pub(crate) fn nearest(&self, p: Vec3) -> Option<(u32, f32)> {
-        if self.len == 0 {
-            return None;
-        }
-        let n = self.tree.nearest_one::<kiddo::SquaredEuclidean>(&p.to_array());
+        let n = self.tree.as_ref()?.nearest_one::<kiddo::SquaredEuclidean>(&p.to_array());
         Some((n.item as u32, n.distance.sqrt()))
     }
 }
