@@ -4,6 +4,13 @@
 // material colours, corner texture coordinates, texture names) and flattens
 // the polygon mesh into fan triangles. Errors are thrown as std::runtime_error
 // and reach Rust as `Err` through the cxx Result.
+
+// GCC 12 warns "may be used uninitialized" inside OpenMesh's property
+// containers (a default-constructed VectorT pushed into a std::vector): a
+// false positive in library headers, silenced for this file only, before any
+// header, so a user's build log stays clean.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+
 #include "shapeshifter/cpp/mesh_io.h"
 #include "shapeshifter/src/ffi.rs.h"
 
