@@ -24,11 +24,11 @@ test: setup
 # ../shared/data where it is present; synthetic shapes stand in otherwise).
 TOWER := ../shared/data/towerruins/towerruins.obj
 bench: build
-	cargo run --release --example encode_bench
-	cargo run --release --example conv_bench
-	if [ -f $(TOWER) ]; then cargo run --release --example recon_bench -- all mesh=$(TOWER); \
-	else cargo run --release --example recon_bench; fi
-	cargo run --release --example metrics_bench
+	cargo run --release $(CARGO_FEATURES) --example encode_bench
+	cargo run --release $(CARGO_FEATURES) --example conv_bench
+	if [ -f $(TOWER) ]; then cargo run --release $(CARGO_FEATURES) --example recon_bench -- all mesh=$(TOWER); \
+	else cargo run --release $(CARGO_FEATURES) --example recon_bench; fi
+	cargo run --release $(CARGO_FEATURES) --example metrics_bench
 
 clean:
 	cargo clean

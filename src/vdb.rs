@@ -74,8 +74,19 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
         // Kept as a string: OpenVDB has no unsigned 64-bit metadata.
         meta.push(meta_str("shapeshifter_seed", &seed.to_string()));
     }
-    if let Some(i) = (0..level.len()).find(|&i| {
-        !(level.offsets[i].is_finite() && level.normals[i].is_finite() && level.colours[i].is_finite())
+    let n = level.len();
+    let lengths = [level.offsets.len(), level.normals.len(), level.colours.len(), level.mask.len()];
+    if lengths.iter().any(|&l| l != n) {
+        return Err(Error::file(
+            path,
+            format!("inconsistent level: {n} voxels but {lengths:?} offsets/normals/colours/mask; not written"),
+        ));
+    }
+    if let Some(i) = (0..n).find(|&i| {
+        !(level.offsets[i].is_finite()
+            && level.normals[i].is_finite()
+            && level.colours[i].is_finite()
+            && level.mask[i].is_finite())
     }) {
         return Err(Error::file(path, format!("voxel {} has NaN or infinite features; not written", level.coords[i])));
     }
@@ -146,7 +157,10 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
         level.offsets.push(((p - centre_world) / voxel_world).as_vec3());
     }
     if let Some(i) = (0..n).find(|&i| {
-        !(level.offsets[i].is_finite() && level.normals[i].is_finite() && level.colours[i].is_finite())
+        !(level.offsets[i].is_finite()
+            && level.normals[i].is_finite()
+            && level.colours[i].is_finite()
+            && level.mask[i].is_finite())
     }) {
         return Err(Error::file(path, format!("voxel {} has NaN or infinite features", level.coords[i])));
     }
