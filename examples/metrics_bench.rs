@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use shapeshifter::level::Frame;
-use shapeshifter::mesh::{Mesh, MeshColours};
+use shapeshifter::mesh::Mesh;
 use shapeshifter::metrics::*;
 
 /// A closed bumpy sphere: UV sphere with `rings` x `segs` quads, radius
@@ -18,27 +18,7 @@ fn bumpy_sphere(rings: u32, segs: u32, phase: f32) -> Mesh {
         1.0 + 0.08 * (5.0 * ph + phase).sin() * (4.0 * th).sin()
             + 0.04 * (11.0 * ph - 2.0 * phase).cos() * (9.0 * th).sin()
     };
-    let mut pos = vec![Vec3::new(0.0, 0.0, radius(0.0, 0.0)), Vec3::new(0.0, 0.0, -radius(std::f32::consts::PI, 0.0))];
-    for i in 1..rings {
-        let th = std::f32::consts::PI * i as f32 / rings as f32;
-        for j in 0..segs {
-            let ph = std::f32::consts::TAU * j as f32 / segs as f32;
-            pos.push(radius(th, ph) * Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()));
-        }
-    }
-    let v = |i: u32, j: u32| 2 + (i - 1) * segs + (j % segs);
-    let mut tris = Vec::new();
-    for j in 0..segs {
-        tris.push([0, v(1, j), v(1, j + 1)]);
-        tris.push([1, v(rings - 1, j + 1), v(rings - 1, j)]);
-    }
-    for i in 1..rings - 1 {
-        for j in 0..segs {
-            tris.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
-            tris.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
-        }
-    }
-    Mesh { name: "bumpy".into(), positions: pos, triangles: tris, colours: MeshColours::None, texture: None }
+    shapeshifter::shapes::uv_sphere(Vec3::ZERO, rings, segs, radius)
 }
 
 fn frame_of(mesh: &Mesh) -> Frame {

@@ -1155,20 +1155,7 @@ mod tests {
     }
 
     /// Axis-aligned box [lo, hi], 12 outward triangles.
-    fn cube(lo: Vec3, hi: Vec3) -> Mesh {
-        let pos: Vec<Vec3> = (0..8)
-            .map(|i| {
-                Vec3::new(
-                    if i & 1 == 0 { lo.x } else { hi.x },
-                    if i & 2 == 0 { lo.y } else { hi.y },
-                    if i & 4 == 0 { lo.z } else { hi.z },
-                )
-            })
-            .collect();
-        let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-        let tris = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-        mesh(pos, tris)
-    }
+    use crate::shapes::axis_box as cube;
 
     /// Height field z = f(x, y) over [-1, 1]^2, n x n quads, normals facing +z.
     fn height_field(n: u32, f: impl Fn(f32, f32) -> f32) -> Mesh {

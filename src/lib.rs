@@ -25,6 +25,7 @@ pub mod recon;
 pub mod render;
 pub mod rng;
 pub mod sample;
+pub mod shapes;
 pub mod sparse_conv;
 pub mod train;
 pub mod vdb;

@@ -1428,55 +1428,15 @@ mod tests {
         Mesh { name: "t".into(), positions, triangles, colours: MeshColours::None, texture: None }
     }
 
-    /// UV sphere, outward-oriented, closed.
+    /// UV sphere of radius `r`, outward-oriented, closed.
     fn sphere(centre: Vec3, r: f32, rings: u32, segs: u32) -> Mesh {
-        let mut pos = vec![centre + Vec3::new(0.0, 0.0, r), centre - Vec3::new(0.0, 0.0, r)];
-        for i in 1..rings {
-            let th = std::f32::consts::PI * i as f32 / rings as f32;
-            for j in 0..segs {
-                let ph = std::f32::consts::TAU * j as f32 / segs as f32;
-                pos.push(centre + r * Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()));
-            }
-        }
-        let v = |i: u32, j: u32| 2 + (i - 1) * segs + (j % segs);
-        let mut tris = Vec::new();
-        for j in 0..segs {
-            tris.push([0, v(1, j), v(1, j + 1)]);
-            tris.push([1, v(rings - 1, j + 1), v(rings - 1, j)]);
-        }
-        for i in 1..rings - 1 {
-            for j in 0..segs {
-                tris.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
-                tris.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
-            }
-        }
-        mesh(pos, tris)
+        crate::shapes::uv_sphere(centre, rings, segs, |_, _| r)
     }
 
-    fn cube(lo: Vec3, hi: Vec3) -> Mesh {
-        let pos = (0..8)
-            .map(|i| {
-                Vec3::new(
-                    if i & 1 == 0 { lo.x } else { hi.x },
-                    if i & 2 == 0 { lo.y } else { hi.y },
-                    if i & 4 == 0 { lo.z } else { hi.z },
-                )
-            })
-            .collect();
-        // Outward-oriented faces.
-        let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-        let tris = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-        mesh(pos, tris)
-    }
+    use crate::shapes::axis_box as cube;
 
     fn signed_volume(m: &Mesh) -> f32 {
-        m.triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| m.positions[i as usize]);
-                a.dot(b.cross(c)) / 6.0
-            })
-            .sum()
+        crate::shapes::signed_volume(&m.positions, &m.triangles)
     }
 
     /// Identity frame, lattice [-1, 1]^3 at `res` (dyadic voxel size).

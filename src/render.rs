@@ -818,12 +818,11 @@ mod tests {
     }
 
     fn cube(colours: bool) -> Mesh {
-        let positions: Vec<Vec3> =
-            (0..8).map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32)).collect();
-        let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-        let triangles = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
-        let colours = if colours { MeshColours::PerVertex(positions.clone()) } else { MeshColours::None };
-        Mesh { name: "cube".into(), positions, triangles, colours, texture: None }
+        let mut m = crate::shapes::axis_box(Vec3::ZERO, Vec3::ONE);
+        if colours {
+            m.colours = MeshColours::PerVertex(m.positions.clone());
+        }
+        m
     }
 
     #[test]

@@ -74,13 +74,7 @@ fn patch() -> OrientedPoints {
 }
 
 fn signed_volume(m: &ReconMesh) -> f32 {
-    m.triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| m.positions[i as usize]);
-            a.dot(b.cross(c)) / 6.0
-        })
-        .sum()
+    crate::shapes::signed_volume(&m.positions, &m.triangles)
 }
 
 /// Largest distance from an input point to the nearest mesh vertex.
