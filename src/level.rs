@@ -112,6 +112,15 @@ impl Level {
             })
             .collect()
     }
+    /// The first voxel with a NaN or infinite offset, normal, colour or mask.
+    pub fn first_non_finite(&self) -> Option<usize> {
+        (0..self.len()).find(|&i| {
+            !(self.offsets[i].is_finite()
+                && self.normals[i].is_finite()
+                && self.colours[i].is_finite()
+                && self.mask[i].is_finite())
+        })
+    }
     /// Keep only the voxels for which `keep` is true.
     pub fn retain(&mut self, keep: impl Fn(usize) -> bool) {
         let idx: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();

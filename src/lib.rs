@@ -18,6 +18,7 @@ mod ffi;
 pub mod info;
 pub mod level;
 pub mod mesh;
+mod nearest;
 pub mod nn;
 pub mod pipeline;
 pub mod metrics;

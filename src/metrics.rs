@@ -39,6 +39,7 @@ use rayon::prelude::*;
 
 use crate::level::{Frame, Level};
 use crate::mesh::Mesh;
+use crate::nearest::Nearest;
 use crate::rng::Rng;
 
 // ---------------------------------------------------------------------------
@@ -1175,83 +1176,24 @@ fn match_group(a: &[Patch], sa: &[Sig], b: &ExemplarPatches, best: &mut [Best]) 
 // Point-set distances
 // ---------------------------------------------------------------------------
 
-/// A balanced kd-tree over points, stored implicitly: the node of range
-/// `[lo, hi)` is its middle element, split along `axis[mid]`.
-struct KdTree {
-    pts: Vec<Vec3>,
-    axis: Vec<u8>,
+/// Nearest-neighbour distances from every point of `from` to the set behind `to`.
+fn nearest_distances(from: &[Vec3], to: &Nearest) -> Vec<f32> {
+    from.par_iter().map(|&p| to.nearest(p).map_or(f32::INFINITY, |(_, d)| d)).collect()
 }
 
-const KD_LEAF: usize = 8;
-
-impl KdTree {
-    fn new(points: &[Vec3]) -> Self {
-        let mut pts: Vec<Vec3> = points.iter().copied().filter(|p| p.is_finite()).collect();
-        let mut axis = vec![0u8; pts.len()];
-        build_kd(&mut pts, &mut axis);
-        KdTree { pts, axis }
+/// The nearest-neighbour distances of the finite points of `a` to those of `b`,
+/// and of `b` to `a`; when a side has no finite point, `Err` with the answer of
+/// both distances: 0 when both are empty, infinite when one is.
+fn distances_both_ways(a: &[Vec3], b: &[Vec3]) -> Result<(Vec<f32>, Vec<f32>), f32> {
+    let finite = |s: &[Vec3]| -> Vec<Vec3> { s.iter().copied().filter(|p| p.is_finite()).collect() };
+    let (a, b) = (finite(a), finite(b));
+    match (a.is_empty(), b.is_empty()) {
+        (true, true) => return Err(0.0),
+        (true, false) | (false, true) => return Err(f32::INFINITY),
+        _ => {}
     }
-
-    /// Squared distance to the nearest point (infinite for an empty tree).
-    fn nearest_d2(&self, q: Vec3) -> f32 {
-        let mut best = f32::INFINITY;
-        self.search(0, self.pts.len(), q, &mut best);
-        best
-    }
-
-    fn search(&self, lo: usize, hi: usize, q: Vec3, best: &mut f32) {
-        if hi - lo <= KD_LEAF {
-            for p in &self.pts[lo..hi] {
-                *best = best.min(p.distance_squared(q));
-            }
-            return;
-        }
-        let mid = (lo + hi) / 2;
-        let a = self.axis[mid] as usize;
-        let p = self.pts[mid];
-        *best = best.min(p.distance_squared(q));
-        let d = q[a] - p[a];
-        let (near, far) = if d < 0.0 { ((lo, mid), (mid + 1, hi)) } else { ((mid + 1, hi), (lo, mid)) };
-        self.search(near.0, near.1, q, best);
-        if d * d < *best {
-            self.search(far.0, far.1, q, best);
-        }
-    }
-}
-
-fn build_kd(pts: &mut [Vec3], axis: &mut [u8]) {
-    let n = pts.len();
-    if n <= KD_LEAF {
-        return;
-    }
-    let (lo, hi) = pts
-        .iter()
-        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(l, h), p| (l.min(*p), h.max(*p)));
-    let ext = hi - lo;
-    let a = if ext.x >= ext.y && ext.x >= ext.z {
-        0
-    } else if ext.y >= ext.z {
-        1
-    } else {
-        2
-    };
-    let mid = n / 2;
-    pts.select_nth_unstable_by(mid, |p, q| p[a].total_cmp(&q[a]));
-    axis[mid] = a as u8;
-    let (pl, pr) = pts.split_at_mut(mid);
-    let (al, ar) = axis.split_at_mut(mid);
-    let (pr, ar) = (&mut pr[1..], &mut ar[1..]);
-    if n > 20_000 {
-        rayon::join(|| build_kd(pl, al), || build_kd(pr, ar));
-    } else {
-        build_kd(pl, al);
-        build_kd(pr, ar);
-    }
-}
-
-/// Distances from every point of `from` to its nearest point of `to`.
-fn nearest_distances(from: &[Vec3], to: &KdTree) -> Vec<f32> {
-    from.par_iter().filter(|p| p.is_finite()).map(|&p| to.nearest_d2(p).sqrt()).collect()
+    let (ta, tb) = rayon::join(|| Nearest::new(&a), || Nearest::new(&b));
+    Ok(rayon::join(|| nearest_distances(&a, &tb), || nearest_distances(&b, &ta)))
 }
 
 /// Symmetric Chamfer distance, in the units of the points (normalised units for
@@ -1261,29 +1203,23 @@ fn nearest_distances(from: &[Vec3], to: &KdTree) -> Vec<f32> {
 /// itself shifted by `t` (less than half the point spacing) gives `|t|`.
 /// 0 for two empty sets, infinite when only one is empty.
 pub fn chamfer(a: &[Vec3], b: &[Vec3]) -> f32 {
-    let (ta, tb) = rayon::join(|| KdTree::new(a), || KdTree::new(b));
-    match (ta.pts.is_empty(), tb.pts.is_empty()) {
-        (true, true) => return 0.0,
-        (true, false) | (false, true) => return f32::INFINITY,
-        _ => {}
+    match distances_both_ways(a, b) {
+        Err(d) => d,
+        Ok((da, db)) => {
+            let mean = |d: &[f32]| d.iter().map(|&v| v as f64).sum::<f64>() / d.len() as f64;
+            (0.5 * (mean(&da) + mean(&db))) as f32
+        }
     }
-    let (da, db) = rayon::join(|| nearest_distances(&ta.pts, &tb), || nearest_distances(&tb.pts, &ta));
-    let mean = |d: &[f32]| d.iter().map(|&v| v as f64).sum::<f64>() / d.len() as f64;
-    (0.5 * (mean(&da) + mean(&db))) as f32
 }
 
 /// Symmetric Hausdorff distance: the largest nearest-neighbour distance in either
 /// direction, in the units of the points. Same conventions for empty sets as
 /// [`chamfer`].
 pub fn hausdorff(a: &[Vec3], b: &[Vec3]) -> f32 {
-    let (ta, tb) = rayon::join(|| KdTree::new(a), || KdTree::new(b));
-    match (ta.pts.is_empty(), tb.pts.is_empty()) {
-        (true, true) => return 0.0,
-        (true, false) | (false, true) => return f32::INFINITY,
-        _ => {}
+    match distances_both_ways(a, b) {
+        Err(d) => d,
+        Ok((da, db)) => da.iter().chain(&db).fold(0.0f32, |m, &d| m.max(d)),
     }
-    let (da, db) = rayon::join(|| nearest_distances(&ta.pts, &tb), || nearest_distances(&tb.pts, &ta));
-    da.iter().chain(&db).fold(0.0f32, |m, &d| m.max(d))
 }
 
 /// A level's surface points in normalised units (the exemplar's bounding-box

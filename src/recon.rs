@@ -44,7 +44,8 @@ mod spatial;
 mod tests;
 
 use glam::Vec3;
-use spatial::{HashGrid, Nearest};
+use crate::nearest::Nearest;
+use spatial::HashGrid;
 use std::str::FromStr;
 use std::time::Instant;
 

@@ -82,12 +82,7 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
             format!("inconsistent level: {n} voxels but {lengths:?} offsets/normals/colours/mask; not written"),
         ));
     }
-    if let Some(i) = (0..n).find(|&i| {
-        !(level.offsets[i].is_finite()
-            && level.normals[i].is_finite()
-            && level.colours[i].is_finite()
-            && level.mask[i].is_finite())
-    }) {
+    if let Some(i) = level.first_non_finite() {
         return Err(Error::file(path, format!("voxel {} has NaN or infinite features; not written", level.coords[i])));
     }
     let flat = |v: &[Vec3]| -> Vec<f32> { v.iter().flat_map(|p| p.to_array()).collect() };
@@ -156,12 +151,7 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
         let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
         level.offsets.push(((p - centre_world) / voxel_world).as_vec3());
     }
-    if let Some(i) = (0..n).find(|&i| {
-        !(level.offsets[i].is_finite()
-            && level.normals[i].is_finite()
-            && level.colours[i].is_finite()
-            && level.mask[i].is_finite())
-    }) {
+    if let Some(i) = level.first_non_finite() {
         return Err(Error::file(path, format!("voxel {} has NaN or infinite features", level.coords[i])));
     }
     let provenance = Provenance {

@@ -1,5 +1,5 @@
-//! A uniform hash grid over points for radius queries, and a k-d tree (kiddo)
-//! for nearest-point queries, which must stay fast far from the points (the
+//! A uniform hash grid over points for radius queries (nearest-point queries
+//! are `crate::nearest`'s: they must stay fast far from the points, where the
 //! Poisson surface of an open sheet wraps around it at many cells' distance).
 //!
 //! Points are sorted by cell so that every occupied cell is one contiguous run
@@ -125,26 +125,6 @@ impl HashGrid {
                 }
             }
         }
-    }
-}
-
-/// Nearest-point queries over a fixed point set.
-pub(crate) struct Nearest {
-    /// None for an empty set (kiddo wants at least one point).
-    tree: Option<kiddo::ImmutableKdTree<f32, 3>>,
-}
-
-impl Nearest {
-    /// Points must be finite.
-    pub(crate) fn new(points: &[Vec3]) -> Self {
-        let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
-        Nearest { tree: (!coords.is_empty()).then(|| kiddo::ImmutableKdTree::new_from_slice(&coords)) }
-    }
-
-    /// The index of the point nearest to `p`, and its distance (None without points).
-    pub(crate) fn nearest(&self, p: Vec3) -> Option<(u32, f32)> {
-        let n = self.tree.as_ref()?.nearest_one::<kiddo::SquaredEuclidean>(&p.to_array());
-        Some((n.item as u32, n.distance.sqrt()))
     }
 }
 

@@ -261,22 +261,3 @@ fn poisson_closes_an_open_patch_within_its_margin() {
     let cov = coverage(&pts, &m);
     assert!(cov < 1.5 * VS, "an input point is {} spacings from the mesh", cov / VS);
 }
-
-#[test]
-fn nearest_is_exact_on_grid_aligned_points_and_empty_sets() {
-    // Voxel points share coordinates along whole planes (flat faces): the k-d
-    // tree must still find the exact nearest, here against a brute-force scan.
-    let pts: Vec<Vec3> = (0..40)
-        .flat_map(|x| (0..40).flat_map(move |y| (0..3).map(move |z| Vec3::new(x as f32, y as f32, z as f32 * 0.5))))
-        .collect();
-    let tree = Nearest::new(&pts);
-    let mut rng = crate::rng::Rng::new(7);
-    for _ in 0..500 {
-        let mut u = |scale: f64| (rng.uniform() * scale - 10.0) as f32;
-        let q = Vec3::new(u(60.0), u(60.0), u(30.0));
-        let (_, d) = tree.nearest(q).unwrap();
-        let best = pts.iter().map(|p| p.distance(q)).fold(f32::INFINITY, f32::min);
-        assert!((d - best).abs() < 1e-4, "nearest {d} vs brute force {best} at {q}");
-    }
-    assert!(Nearest::new(&[]).nearest(Vec3::ZERO).is_none());
-}
