@@ -147,7 +147,7 @@ fn main() {
         Some(path) => {
             let m = shapeshifter::mesh::load(std::path::Path::new(path)).expect("load mesh=PATH");
             let (levels, _) = shapeshifter::encode::encode(&m, &Default::default()).expect("encode");
-            shapeshifter::pipeline::oriented_points(levels.last().expect("levels"))
+            shapeshifter::pipeline::oriented_points(levels.last().expect("levels")).expect("active voxels")
         }
         None => sample(res),
     };

@@ -581,10 +581,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Points { input, output } => {
             let (level, _) = vdb::read_level(&input)?;
-            let p = pipeline::oriented_points(&level);
-            if p.positions.is_empty() {
-                anyhow::bail!("{}: no active voxels", input.display());
-            }
+            let p = pipeline::oriented_points(&level).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
             mesh::save_points_ply(&output, &p.positions, &p.normals, &p.colours)?;
             Ok(ExitCode::SUCCESS)
         }

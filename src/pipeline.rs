@@ -219,15 +219,19 @@ pub fn record_config(dir: &Path, config: &Config) -> Result<()> {
 }
 
 /// The surface voxels (mask > 0) of a level as oriented coloured points in
-/// the exemplar's frame; spacing = the level's voxel size in world units.
-pub fn oriented_points(level: &Level) -> crate::recon::OrientedPoints {
+/// the exemplar's frame; spacing = the level's voxel size in world units. An
+/// error when there are none (nothing to mesh or write).
+pub fn oriented_points(level: &Level) -> Result<crate::recon::OrientedPoints> {
     let keep: Vec<usize> = (0..level.len()).filter(|&i| level.mask[i] > 0.0).collect();
-    crate::recon::OrientedPoints {
+    if keep.is_empty() {
+        return Err(Error::Invalid("the level has no active voxels (mask > 0)".into()));
+    }
+    Ok(crate::recon::OrientedPoints {
         positions: keep.iter().map(|&i| level.point_world(i).as_vec3()).collect(),
         normals: keep.iter().map(|&i| level.normals[i].normalize_or_zero()).collect(),
         colours: keep.iter().map(|&i| level.colours[i]).collect(),
         spacing: (level.voxel_size() / level.frame.scale) as f32,
-    }
+    })
 }
 
 /// Meshes a level: Poisson for closed exemplars, APSS for open ones unless
@@ -241,10 +245,7 @@ pub fn mesh_level(
 ) -> Result<(Mesh, crate::recon::Method)> {
     use crate::recon::{self, ApssOptions, Method, PoissonOptions};
     let method = method.unwrap_or(if exemplar_open { Method::Apss } else { Method::Poisson });
-    let points = oriented_points(level);
-    if points.positions.is_empty() {
-        return Err(Error::Invalid("the level has no active voxels (mask > 0) to mesh".into()));
-    }
+    let points = oriented_points(level)?;
     let poisson = PoissonOptions { resolution, ..Default::default() };
     let apss = ApssOptions { resolution, ..Default::default() };
     let m = recon::reconstruct(&points, method, &poisson, &apss).map_err(|e| Error::Invalid(e.to_string()))?;
