@@ -210,17 +210,43 @@ pub enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
-    /// Render a level file's oriented coloured points, or a mesh, to a PNG.
+    /// Render a level file's oriented coloured points, or a mesh, to a PNG;
+    /// or, given folders of level files (an encoded exemplar, variants, ladder
+    /// rungs), a contact sheet: the finest level of each from one camera, with
+    /// a close-up of the same region, the first folder framed as the reference.
     ///
     /// Example: shapeshifter render out/tower/level_4.vdb -o level_4.png --azimuth 120
+    /// Example: shapeshifter render out/demo/exemplar out/demo/variants/variant_* -o sheet.png
     Render {
-        /// A level file (.vdb) or a mesh.
-        input: PathBuf,
+        /// A level file (.vdb) or a mesh; or folders of level files.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
         /// The PNG to write.
         #[arg(short, long)]
         output: PathBuf,
         #[command(flatten)]
         view: ViewArgs,
+    },
+    /// Build the degradation ladder of an encoded exemplar: its finest level
+    /// smoothed (two strengths), washed out, colour-shuffled, a blob upsampled
+    /// from level 0, and untrained networks' output; score every rung with
+    /// `eval`'s measures and check that each measure ranks them as expected.
+    /// Writes one folder per rung, ladder.json and contact_sheet.png; exits 1
+    /// when an expectation fails.
+    ///
+    /// Example: shapeshifter ladder out/demo/exemplar -o out/demo_ladder
+    Ladder {
+        /// The encoded exemplar folder (from `encode`, or OUT/exemplar of `run`).
+        dir: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Configuration of the untrained networks. Default: the config.toml
+        /// of DIR/models or DIR/../models (as `run` lays them out), else the
+        /// cpu profile; `none` skips the untrained rung.
+        #[arg(long)]
+        profile: Option<String>,
+        #[arg(long, default_value = "auto")]
+        device: String,
     },
 }
 
@@ -383,21 +409,23 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool) -
     times.push(("mesh", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
     let files = dirs.iter().map(|d| evaluate::read_variant(d)).collect::<Result<Vec<_>, _>>()?;
-    let (report, mode) = evaluate::evaluate(&exemplar_dir, None, &files, 256)?;
+    let evaluation = evaluate::evaluate(&exemplar_dir, None, &files, 256)?;
     let eval_path = out.join("eval.json");
-    let text = serde_json::to_string_pretty(&report)?;
-    shapeshifter::error::write_atomically(&eval_path, |tmp| {
-        std::fs::write(tmp, &text).map_err(|e| shapeshifter::Error::file(&eval_path, e.to_string()))
-    })?;
+    evaluation.write_json(&eval_path)?;
+    let sheet_path = out.join("contact_sheet.png");
+    let mut sheet = vec![("exemplar".to_string(), levels[levels.len() - 1].clone())];
+    sheet.extend(files.into_iter().map(|f| (f.name, f.finest)));
+    pipeline::write_contact_sheet(&sheet_path, &sheet)?;
     times.push(("evaluate", t.elapsed().as_secs_f64()));
     println!("\n{} -> {}", source_name, out.display());
     println!("  exemplar levels  {}", exemplar_dir.display());
     println!("  models           {}", models_dir.display());
     println!("  variants         {} ({} folders, previews level_K.png)", variants_dir.display(), dirs.len());
-    println!("  metrics          {} ({mode:?} voxelisation)", eval_path.display());
+    println!("  metrics          {}", eval_path.display());
+    println!("  contact sheet    {}", sheet_path.display());
     println!("  time             {}  (total {:.0} s)",
         times.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect::<Vec<_>>().join(", "), t0.elapsed().as_secs_f64());
-    print!("{}", report.table());
+    print!("{}", evaluation.table());
     Ok(())
 }
 
@@ -478,14 +506,10 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Eval { exemplar, variants, exemplar_mesh, resolution, output } => {
             let mesh = exemplar_mesh.as_deref().map(mesh::load).transpose()?;
             let files = variants.iter().map(|d| evaluate::read_variant(d)).collect::<Result<Vec<_>, _>>()?;
-            let (report, mode) = evaluate::evaluate(&exemplar, mesh.as_ref(), &files, resolution)?;
-            println!("voxelisation: {mode:?}");
-            print!("{}", report.table());
+            let evaluation = evaluate::evaluate(&exemplar, mesh.as_ref(), &files, resolution)?;
+            print!("{}", evaluation.table());
             if let Some(out) = output {
-                let text = serde_json::to_string_pretty(&report)?;
-                shapeshifter::error::write_atomically(&out, |tmp| {
-                    std::fs::write(tmp, &text).map_err(|e| shapeshifter::Error::file(&out, e.to_string()))
-                })?;
+                evaluation.write_json(&out)?;
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -585,18 +609,63 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             mesh::save_points_ply(&output, &p.positions, &p.normals, &p.colours)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Render { input, output, view } => {
+        Command::Render { inputs, output, view } => {
+            if inputs.iter().any(|p| p.is_dir()) {
+                let entries = inputs
+                    .iter()
+                    .map(|d| pipeline::finest_in(d))
+                    .collect::<Result<Vec<_>, _>>()?;
+                pipeline::write_contact_sheet(&output, &entries)?;
+                log::info!("contact sheet of {} folders -> {}", entries.len(), output.display());
+                return Ok(ExitCode::SUCCESS);
+            }
+            let [input] = inputs.as_slice() else {
+                anyhow::bail!("render: one file (a .vdb level or a mesh), or folders of level files for a contact sheet");
+            };
             let opts = view.options();
             let ext = input.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
             let img = if ext == "vdb" {
-                let (level, _) = vdb::read_level(&input)?;
+                let (level, _) = vdb::read_level(input)?;
                 render::render_level(&level, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?
             } else {
-                let m = mesh::load(&input)?;
+                let m = mesh::load(input)?;
                 render::render_mesh(&m, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?
             };
             render::save_png(&img, &output)?;
             Ok(ExitCode::SUCCESS)
+        }
+        Command::Ladder { dir, output, profile, device: dev } => {
+            let config = match profile.as_deref() {
+                Some("none") => None,
+                Some(p) => Some(Config::load(p, &[])?),
+                None => {
+                    let found = [dir.join("models"), dir.join("..").join("models")]
+                        .into_iter()
+                        .map(|m| m.join("config.toml"))
+                        .find(|p| p.is_file());
+                    Some(match found {
+                        Some(p) => Config::read(&p)?,
+                        None => Config::load("cpu", &[])?,
+                    })
+                }
+            };
+            let device = device(&dev)?;
+            let outcome = pipeline::ladder_stage(&dir, &output, config.as_ref(), device)?;
+            print!("{}", outcome.evaluation.table());
+            for s in &outcome.skipped {
+                println!("skipped: {s}");
+            }
+            let failed: Vec<_> = outcome.failed().collect();
+            println!(
+                "expected order: {} of {} checks hold -> {}",
+                outcome.checks.len() - failed.len(),
+                outcome.checks.len(),
+                output.join("ladder.json").display()
+            );
+            for c in &failed {
+                println!("  FAILS {} on {}: {:.4} vs exemplar {:.4} ({})", c.metric, c.rung, c.value, c.exemplar, c.requirement);
+            }
+            Ok(if failed.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
         }
     }
 }

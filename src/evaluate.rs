@@ -18,10 +18,10 @@ use crate::dataset;
 use crate::error::{Error, Result};
 use crate::level::Level;
 use crate::mesh::{self, Mesh};
-use crate::metrics::{self, EvalReport, LpParams, Occupancy, OccupancyGrid, VariantInput};
+use crate::metrics::{self, EvalParams, EvalReport, Occupancy, OccupancyGrid, ShapeInput};
 use crate::vdb;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum Voxelisation {
     Solid,
     Surface,
@@ -63,23 +63,85 @@ fn points_normalised(level: &Level) -> Vec<Vec3> {
     metrics::level_points_normalised(level)
 }
 
-/// Lattice over `level`'s points with one voxel per level voxel.
-fn surface_lattice(level: &Level) -> OccupancyGrid {
-    let pts = points_normalised(level);
-    let (lo, hi) = pts.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(a, b), p| (a.min(*p), b.max(*p)));
-    let longest = (hi - lo).max_element();
-    let res = (longest / level.voxel_size() as f32).ceil().max(1.0) as u32;
-    OccupancyGrid::from_box(level.frame, lo, hi, res, metrics::DEFAULT_MARGIN)
+/// Bounding box of points (normalised units); None without finite points.
+fn bounds(points: &[Vec3]) -> Option<(Vec3, Vec3)> {
+    points.iter().filter(|p| p.is_finite()).fold(None, |acc, &p| match acc {
+        None => Some((p, p)),
+        Some((lo, hi)) => Some((lo.min(p), hi.max(p))),
+    })
+}
+
+fn mesh_bounds(mesh: &Mesh, frame: crate::level::Frame) -> Option<(Vec3, Vec3)> {
+    let pts: Vec<Vec3> = mesh.positions.iter().map(|p| frame.to_normalised(p.as_dvec3()).as_vec3()).collect();
+    bounds(&pts)
+}
+
+fn union(a: Option<(Vec3, Vec3)>, b: Option<(Vec3, Vec3)>) -> Option<(Vec3, Vec3)> {
+    match (a, b) {
+        (Some((l1, h1)), Some((l2, h2))) => Some((l1.min(l2), h1.max(h2))),
+        (x, None) | (None, x) => x,
+    }
+}
+
+/// How the shapes of one evaluation are voxelised, chosen once for the set.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Lattice {
+    pub voxelisation: Voxelisation,
+    /// Meshes voxelised as solids (closed exemplar) or as surfaces only (open
+    /// exemplar: a sheet stays a sheet).
+    pub filled: bool,
+    /// Voxels of the evaluation lattice (x, y, z); the 22^3 patches use a
+    /// lattice of half this resolution.
+    pub dims: [u32; 3],
+    /// Voxel edge, normalised units (the exemplar's bounding-box diagonal is 2).
+    pub voxel: f32,
+}
+
+/// An evaluation as `eval.json` holds it: how the shapes were voxelised, then
+/// every figure with its parameters.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Evaluation {
+    pub lattice: Lattice,
+    #[serde(flatten)]
+    pub report: EvalReport,
+}
+
+impl Evaluation {
+    /// Writes the evaluation as pretty JSON, atomically.
+    pub fn write_json(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(|e| Error::file(path, e.to_string()))?;
+        crate::error::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(path, e.to_string())))
+    }
+
+    /// The lattice in one line, then the report's table.
+    pub fn table(&self) -> String {
+        let l = &self.lattice;
+        format!(
+            "voxelisation: {:?}{} on {}x{}x{} voxels\n{}",
+            l.voxelisation,
+            if l.voxelisation == Voxelisation::Solid && !l.filled { " (open exemplar: surfaces only)" } else { "" },
+            l.dims[0],
+            l.dims[1],
+            l.dims[2],
+            self.report.table()
+        )
+    }
 }
 
 /// Evaluates variants against the encoded exemplar in `exemplar_dir`.
 /// `exemplar_mesh`: the exemplar mesh for `Solid` voxelisation.
+///
+/// The lattice covers the exemplar AND every variant (a variant larger than
+/// the exemplar is not clipped); its voxel is the exemplar's finest level
+/// voxel for point shells (aligned with that level's grid, so each level voxel
+/// is one lattice voxel), or `resolution` voxels along the exemplar's longest
+/// side for solids.
 pub fn evaluate(
     exemplar_dir: &Path,
     exemplar_mesh: Option<&Mesh>,
     variants: &[VariantFiles],
     resolution: u32,
-) -> Result<(EvalReport, Voxelisation)> {
+) -> Result<Evaluation> {
     if variants.is_empty() {
         return Err(Error::Invalid("no variants to evaluate".into()));
     }
@@ -89,36 +151,68 @@ pub fn evaluate(
     };
     let mode = match exemplar_mesh {
         Some(_) if variants.iter().all(|v| v.mesh.is_some()) => Voxelisation::Solid,
-        _ => Voxelisation::Surface,
+        Some(_) => {
+            log::warn!("eval: not every variant has a mesh.ply: scoring the finest levels' point shells instead");
+            Voxelisation::Surface
+        }
+        None => Voxelisation::Surface,
     };
     let frame = ex_fine.frame;
-    let (grid, exemplar_occ): (OccupancyGrid, Occupancy) = match (mode, exemplar_mesh) {
+    let ex_points = points_normalised(ex_fine);
+    let variant_points: Vec<Vec<Vec3>> = variants.iter().map(|v| points_normalised(&v.finest)).collect();
+    let margin = metrics::DEFAULT_MARGIN;
+    let (grid, filled) = match (mode, exemplar_mesh) {
         (Voxelisation::Solid, Some(m)) => {
-            let grid = OccupancyGrid::for_exemplar(m, frame, resolution);
-            let occ = metrics::voxelise_mesh(m, &grid);
-            (grid, occ)
+            let ex_box = mesh_bounds(m, frame)
+                .ok_or_else(|| Error::Invalid("the exemplar mesh has no finite vertex".into()))?;
+            let all = variants.iter().filter_map(|v| v.mesh.as_ref()).fold(Some(ex_box), |b, vm| union(b, mesh_bounds(vm, frame)));
+            let (lo, hi) = all.unwrap_or(ex_box);
+            let voxel = (ex_box.1 - ex_box.0).max_element() / resolution.max(1) as f32;
+            (OccupancyGrid::covering(frame, lo, hi, voxel, margin, None), m.is_closed())
         }
         _ => {
-            let grid = surface_lattice(ex_fine);
-            let occ = metrics::voxelise_points(&points_normalised(ex_fine), &grid);
-            (grid, occ)
+            let all = variant_points.iter().fold(bounds(&ex_points), |b, p| union(b, bounds(p)));
+            let (lo, hi) = all.ok_or_else(|| Error::file(exemplar_dir, "the finest level has no finite point"))?;
+            // Aligned with the finest level's grid lines (-1 + k * voxel).
+            let voxel = ex_fine.voxel_size() as f32;
+            (OccupancyGrid::covering(frame, lo, hi, voxel, margin, Some(-1.0)), false)
         }
     };
-    let occupancies: Vec<Occupancy> = variants
+    let half = grid.halved();
+    let voxelise = |mesh: Option<&Mesh>, points: &[Vec3], g: &OccupancyGrid| -> Occupancy {
+        match (mode, mesh) {
+            (Voxelisation::Solid, Some(m)) if filled => metrics::voxelise_mesh(m, g),
+            (Voxelisation::Solid, Some(m)) => metrics::voxelise_mesh_surface(m, g),
+            _ => metrics::voxelise_normalised_points(points, g),
+        }
+    };
+    let ex_occ = [voxelise(exemplar_mesh, &ex_points, &grid), voxelise(exemplar_mesh, &ex_points, &half)];
+    let occs: Vec<[Occupancy; 2]> = variants
         .iter()
-        .map(|v| match (mode, &v.mesh) {
-            (Voxelisation::Solid, Some(m)) => metrics::voxelise_mesh(m, &grid),
-            _ => metrics::voxelise_points(&points_normalised(&v.finest), &grid),
-        })
+        .zip(&variant_points)
+        .map(|(v, p)| [voxelise(v.mesh.as_ref(), p, &grid), voxelise(v.mesh.as_ref(), p, &half)])
         .collect();
     let coarse: Vec<Vec<Vec3>> = variants.iter().map(|v| points_normalised(&v.coarsest)).collect();
-    let inputs: Vec<VariantInput> = variants
-        .iter()
-        .zip(&occupancies)
-        .zip(&coarse)
-        .map(|((v, occ), c)| VariantInput { name: v.name.clone(), occupancy: occ, coarse_points: Some(c) })
-        .collect();
     let ex_coarse_pts = points_normalised(ex_coarse);
-    let report = metrics::evaluate(&exemplar_occ, Some(&ex_coarse_pts), &inputs, &LpParams::default());
-    Ok((report, mode))
+    let exemplar = ShapeInput {
+        name: "exemplar".into(),
+        occupancy: &ex_occ[0],
+        occupancy_22: &ex_occ[1],
+        finest: ex_fine,
+        coarse_points: Some(&ex_coarse_pts),
+    };
+    let inputs: Vec<ShapeInput> = variants
+        .iter()
+        .zip(&occs)
+        .zip(&coarse)
+        .map(|((v, occ), c)| ShapeInput {
+            name: v.name.clone(),
+            occupancy: &occ[0],
+            occupancy_22: &occ[1],
+            finest: &v.finest,
+            coarse_points: Some(c),
+        })
+        .collect();
+    let report = metrics::evaluate(&exemplar, &inputs, &EvalParams::default()).map_err(|e| Error::Invalid(e.to_string()))?;
+    Ok(Evaluation { lattice: Lattice { voxelisation: mode, filled, dims: grid.dims, voxel: grid.voxel }, report })
 }

@@ -16,6 +16,7 @@ pub mod exemplar;
 pub mod grid;
 mod ffi;
 pub mod info;
+pub mod ladder;
 pub mod level;
 pub mod mesh;
 mod nearest;

@@ -284,3 +284,95 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
     }
     Ok(done)
 }
+
+/// The finest level in a folder of `level_K.vdb` files (a variant folder, an
+/// encoded exemplar, a ladder rung), with the folder's name.
+pub fn finest_in(dir: &Path) -> Result<(String, Level)> {
+    let files = crate::evaluate::read_variant(dir)?;
+    Ok((files.name, files.finest))
+}
+
+/// Writes `OUT/contact_sheet.png` of (name, level) pairs, the first the reference.
+pub fn write_contact_sheet(path: &Path, entries: &[(String, Level)]) -> Result<()> {
+    let refs: Vec<(String, &Level)> = entries.iter().map(|(n, l)| (n.clone(), l)).collect();
+    let sheet = render::contact_sheet(&refs, &render::SheetOptions::default())?;
+    render::save_png(&sheet, path)?;
+    Ok(())
+}
+
+/// The degradation ladder of an encoded exemplar, scored.
+#[derive(Clone, Debug, Serialize)]
+pub struct LadderOutcome {
+    pub options: crate::ladder::LadderOptions,
+    pub evaluation: crate::evaluate::Evaluation,
+    /// Every expectation on every rung, and whether it held.
+    pub checks: Vec<crate::ladder::CheckResult>,
+    /// Rungs that could not be scored, and why.
+    pub skipped: Vec<String>,
+}
+
+impl LadderOutcome {
+    pub fn failed(&self) -> impl Iterator<Item = &crate::ladder::CheckResult> {
+        self.checks.iter().filter(|c| !c.ok)
+    }
+}
+
+/// Builds the ladder of the encoded exemplar in `exemplar_dir` into `out`
+/// (one folder per rung, `contact_sheet.png`, `ladder.json`), scores every
+/// rung as a variant and checks the expected order. With `config`, the
+/// `untrained` rung is sampled from freshly initialised networks of that
+/// configuration.
+pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, device: tch::Device) -> Result<LadderOutcome> {
+    use crate::ladder::{self, LadderOptions, Rung};
+    let (manifest, levels) = dataset::read(exemplar_dir)?;
+    let options = LadderOptions::default();
+    let mut rungs = ladder::degrade(&levels, &options)?;
+    let mut skipped = Vec::new();
+    match config {
+        Some(config) => {
+            let t = Instant::now();
+            let untrained = sample::untrained_models(config, levels.len(), device, options.seed).and_then(|m| {
+                sample::sample(&m, &levels, &SampleOptions::from_config(config, 1, options.seed), None)
+            });
+            match untrained {
+                Ok(mut v) if v.first().and_then(|l| l.last()).is_some_and(|l| l.len() > 0 && l.index + 1 == levels.len()) => {
+                    log::info!("ladder: untrained networks sampled in {:.1} s", t.elapsed().as_secs_f64());
+                    rungs.push((Rung::Untrained, v.swap_remove(0)));
+                }
+                Ok(_) => skipped.push("untrained: every voxel was pruned before the finest level (nothing to score)".into()),
+                Err(e) => skipped.push(format!("untrained: {e}")),
+            }
+        }
+        None => skipped.push("untrained: no configuration (no models folder, no --profile)".into()),
+    }
+    let provenance = Provenance {
+        exemplar: manifest.exemplar.clone(),
+        seed: Some(options.seed),
+        config_digest: config.map(|c| c.digest()).unwrap_or_default(),
+        exemplar_open: manifest.open_surface,
+    };
+    ladder::write_rungs(out, &rungs, &provenance)?;
+    let files: Vec<crate::evaluate::VariantFiles> = rungs
+        .iter()
+        .map(|(r, l)| crate::evaluate::VariantFiles {
+            name: r.name().into(),
+            finest: l[l.len() - 1].clone(),
+            coarsest: l[0].clone(),
+            mesh: None,
+        })
+        .collect();
+    let evaluation = crate::evaluate::evaluate(exemplar_dir, None, &files, 256)?;
+    let finest = &levels[levels.len() - 1];
+    let colourful = crate::metrics::colour::spread(&finest.colours) > 0.02;
+    if !colourful {
+        skipped.push("colour expectations: the exemplar has one colour (nothing to wash out or shuffle)".into());
+    }
+    let checks = ladder::check(&evaluation.report.variants, colourful);
+    let entries: Vec<(String, Level)> = files.into_iter().map(|f| (f.name, f.finest)).collect();
+    write_contact_sheet(&out.join("contact_sheet.png"), &entries)?;
+    let outcome = LadderOutcome { options, evaluation, checks, skipped };
+    let path = out.join("ladder.json");
+    let text = serde_json::to_string_pretty(&outcome).map_err(|e| Error::file(&path, e.to_string()))?;
+    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))?;
+    Ok(outcome)
+}

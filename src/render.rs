@@ -32,6 +32,9 @@ use rayon::prelude::*;
 use crate::level::Level;
 use crate::mesh::{Mesh, MeshColours};
 
+mod contact;
+pub use contact::{contact_sheet, SheetOptions};
+
 /// Largest accepted image side, pixels.
 pub const MAX_SIDE: u32 = 16384;
 /// Largest accepted image, pixels in all: each worker thread holds an 8-byte
@@ -70,6 +73,20 @@ pub struct RenderOptions {
     pub point_size: f32,
     /// Colour of pixels that nothing covers, 8-bit RGB.
     pub background: [u8; 3],
+    /// Frame this world-space box (its 8 corners) instead of the object's
+    /// own extents: every image rendered with the same box and angles shares
+    /// one camera (a contact sheet).
+    pub fit_box: Option<(Vec3, Vec3)>,
+    /// Close-up: after framing, magnify by `factor` about the point at
+    /// `centre` (fractions of the framed image's width and height, 0..1).
+    pub zoom: Option<Zoom>,
+}
+
+/// A close-up of a framed view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Zoom {
+    pub centre: Vec2,
+    pub factor: f32,
 }
 
 impl Default for RenderOptions {
@@ -81,6 +98,8 @@ impl Default for RenderOptions {
             elevation_deg: 25.0,
             point_size: 0.9,
             background: [236, 236, 240],
+            fit_box: None,
+            zoom: None,
         }
     }
 }
@@ -192,7 +211,7 @@ pub fn render_points(points: &PointSet, opts: &RenderOptions) -> Result<RgbImage
         return Err(RenderError::Invalid("every point position is NaN or infinite".into()));
     }
     let radius_world = opts.point_size * points.spacing;
-    let fit = Fit::new(&extents, radius_world, opts);
+    let fit = Fit::framed(&extents, radius_world, opts, &view);
     let radius_px = radius_world * fit.scale;
     log::debug!("rendering {n} points at {}x{}, splat radius {radius_px:.2} px", opts.width, opts.height);
     let grid = Grid::new(opts);
@@ -250,7 +269,7 @@ pub fn render_mesh(mesh: &Mesh, opts: &RenderOptions) -> Result<RgbImage> {
     if extents.is_empty() {
         return Err(RenderError::Invalid("every vertex position is NaN or infinite".into()));
     }
-    let fit = Fit::new(&extents, 0.0, opts);
+    let fit = Fit::framed(&extents, 0.0, opts, &view);
     // Screen x, y (pixels) and distance from the nearest plane (world units).
     let screen: Vec<Vec3> = mesh
         .positions
@@ -290,6 +309,16 @@ pub fn render_mesh(mesh: &Mesh, opts: &RenderOptions) -> Result<RgbImage> {
         let [pa, pb, pc] = tri.map(|v| mesh.positions[v as usize]);
         shade((pb - pa).cross(pc - pa), colour, &view)
     }))
+}
+
+/// Where world point `p` falls in an image framed by `opts` (fractions of
+/// width and height, before any zoom): the centre of a close-up.
+pub fn screen_fraction(p: Vec3, opts: &RenderOptions) -> Vec2 {
+    let view = View::new(opts);
+    let e = Extents::of(&[p], &view);
+    let fit = Fit::framed(&e, 0.0, &RenderOptions { zoom: None, ..opts.clone() }, &view);
+    let (x, y, _) = fit.project(&view, p);
+    Vec2::new(x / opts.width.max(1) as f32, y / opts.height.max(1) as f32)
 }
 
 /// Writes `img` as a PNG without ever leaving a half-written file at `path`:
@@ -402,6 +431,32 @@ impl Fit {
         }
         let mid = Vec2::new(e.lo.x + e.hi.x, e.lo.y + e.hi.y) * 0.5;
         Fit { scale, origin: Vec2::new(w * 0.5 - mid.x * scale, h * 0.5 + mid.y * scale), near: e.hi.z }
+    }
+
+    /// The fit of `opts`: to `fit_box` when given (depth still from the
+    /// object's own extents), else to the object; then the close-up, if any.
+    fn framed(e: &Extents, pad: f32, opts: &RenderOptions, view: &View) -> Fit {
+        let mut fit = match opts.fit_box {
+            Some((lo, hi)) => {
+                let corners: Vec<Vec3> =
+                    (0..8).map(|k| Vec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][k >> 2])).collect();
+                let b = Extents::of(&corners, view);
+                if b.is_empty() {
+                    Fit::new(e, pad, opts)
+                } else {
+                    Fit { near: e.hi.z, ..Fit::new(&b, pad, opts) }
+                }
+            }
+            None => Fit::new(e, pad, opts),
+        };
+        if let Some(z) = opts.zoom.filter(|z| z.factor.is_finite() && z.factor > 0.0) {
+            // Pixel (c) of the framed image goes to the image centre.
+            let c = z.centre * Vec2::new(opts.width as f32, opts.height as f32);
+            let mid = Vec2::new(opts.width as f32, opts.height as f32) * 0.5;
+            fit.origin = mid + (fit.origin - c) * z.factor;
+            fit.scale *= z.factor;
+        }
+        fit
     }
 
     /// (pixel x, pixel y, distance behind the nearest plane in world units).

@@ -77,6 +77,23 @@ pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -
     Ok(Models { config: config.clone(), device, diffusion, upsamplers })
 }
 
+/// Freshly initialised networks for levels `0..levels` (libtorch's generator
+/// seeded with `seed` first, so the same seed gives the same networks): the
+/// floor of the degradation ladder, what the method makes of noise.
+pub fn untrained_models(config: &Config, levels: usize, device: Device, seed: u64) -> Result<Models> {
+    if levels == 0 {
+        return Err(Error::Invalid("no levels to build".into()));
+    }
+    tch::manual_seed(seed as i64);
+    let mut diffusion = Vec::with_capacity(levels);
+    let mut upsamplers = Vec::with_capacity(levels);
+    for l in 0..levels {
+        diffusion.push(new_diffusion(&config.model, l, device)?);
+        upsamplers.push(if l == 0 { None } else { Some(new_upsampler(&config.model, device)?) });
+    }
+    Ok(Models { config: config.clone(), device, diffusion, upsamplers })
+}
+
 /// What to sample.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SampleOptions {

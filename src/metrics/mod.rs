@@ -38,6 +38,13 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::level::{Frame, Level};
+
+pub mod colour;
+pub mod detail;
+mod voxel_index;
+
+pub use colour::{ColourParams, ColourPatches, ColourScores};
+pub use detail::{DetailScores, Variation};
 use crate::mesh::Mesh;
 use crate::nearest::Nearest;
 use crate::rng::Rng;
@@ -88,6 +95,45 @@ impl OccupancyGrid {
             origin[a] = centre[a] - 0.5 * n as f32 * voxel;
         }
         OccupancyGrid { frame, origin, voxel, dims }
+    }
+
+    /// Lattice of voxels of edge `voxel` (normalised units) covering the box
+    /// `[lo, hi]` (normalised units) plus `margin` on every side. With
+    /// `align`, voxel boundaries fall on `align + k * voxel` (a level's own
+    /// grid lines, so each level voxel is one lattice voxel); else the lattice
+    /// is centred on the box.
+    pub fn covering(frame: Frame, lo: Vec3, hi: Vec3, voxel: f32, margin: f32, align: Option<f32>) -> Self {
+        let voxel = if voxel.is_finite() && voxel > 0.0 { voxel } else { 2.0 / DEFAULT_RESOLUTION as f32 };
+        let (lo, hi) = (lo - Vec3::splat(margin.max(0.0)), hi + Vec3::splat(margin.max(0.0)));
+        let mut dims = [0u32; 3];
+        let mut origin = Vec3::ZERO;
+        for a in 0..3 {
+            match align {
+                Some(g) => {
+                    let first = ((lo[a] - g) / voxel).floor();
+                    let last = ((hi[a] - g) / voxel).ceil();
+                    origin[a] = g + first * voxel;
+                    dims[a] = (last - first).max(1.0) as u32;
+                }
+                None => {
+                    let n = ((hi[a] - lo[a]) / voxel).ceil().max(1.0) as u32;
+                    dims[a] = n;
+                    origin[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * n as f32 * voxel;
+                }
+            }
+        }
+        OccupancyGrid { frame, origin, voxel, dims }
+    }
+
+    /// The same region at half the resolution (voxels twice as large, the
+    /// same origin): 11^3 patches on it span 22^3 voxels of this lattice.
+    pub fn halved(&self) -> Self {
+        OccupancyGrid {
+            frame: self.frame,
+            origin: self.origin,
+            voxel: self.voxel * 2.0,
+            dims: self.dims.map(|d| d.div_ceil(2).max(1)),
+        }
     }
 
     /// The lattice for an exemplar (world units) under its normalisation `frame`:
@@ -384,6 +430,10 @@ pub fn voxelise_mesh(mesh: &Mesh, grid: &OccupancyGrid) -> Occupancy {
 }
 
 fn voxelise_mesh_with(mesh: &Mesh, grid: &OccupancyGrid, with_surface: bool) -> Occupancy {
+    voxelise_mesh_fill(mesh, grid, with_surface, true)
+}
+
+fn voxelise_mesh_fill(mesh: &Mesh, grid: &OccupancyGrid, with_surface: bool, fill_inside: bool) -> Occupancy {
     let mut occ = Occupancy::empty(grid.dims);
     let [nx, ny, nz] = grid.dims.map(|d| d as usize);
     if nx == 0 || ny == 0 || nz == 0 {
@@ -458,7 +508,7 @@ fn voxelise_mesh_with(mesh: &Mesh, grid: &OccupancyGrid, with_surface: bool) -> 
         crossings.clear();
         for &t in list {
             let tri = &tris[t as usize];
-            if tri.area2 != 0 {
+            if fill_inside && tri.area2 != 0 {
                 if let Some(x) = ray_crossing(tri, ray) {
                     crossings.push((x, if tri.area2 > 0 { 1i32 } else { -1 }));
                 }
@@ -582,6 +632,27 @@ fn clip_x_range(p: &[DVec3; 3], j: f64, k: f64) -> Option<(f64, f64)> {
     Some((lo, hi))
 }
 
+/// Surface-only occupancy of a point set given in normalised units (the
+/// lattice's own), e.g. [`level_points_normalised`]. Points outside the
+/// lattice are dropped.
+pub fn voxelise_normalised_points(positions: &[Vec3], grid: &OccupancyGrid) -> Occupancy {
+    let mut occ = Occupancy::empty(grid.dims);
+    for &p in positions {
+        let g = ((p - grid.origin) / grid.voxel).floor();
+        if g.is_finite() {
+            occ.set(g.x as i64, g.y as i64, g.z as i64);
+        }
+    }
+    occ
+}
+
+/// The voxels a mesh's surface passes through, nothing filled: how an OPEN
+/// surface is voxelised (a sheet stays a sheet; the winding number of a
+/// surface with holes does not say what is inside).
+pub fn voxelise_mesh_surface(mesh: &Mesh, grid: &OccupancyGrid) -> Occupancy {
+    voxelise_mesh_fill(mesh, grid, true, false)
+}
+
 /// Surface-only occupancy of a point set (world units, e.g.
 /// [`Level::point_world`] of a coarse level): the voxels that contain a point.
 /// Nothing is filled, so compare it only with other point-set occupancies.
@@ -652,7 +723,7 @@ const HALF: i64 = (PATCH / 2) as i64;
 pub const PATCH_WORDS: usize = (PATCH * PATCH * PATCH).div_ceil(64);
 
 /// Parameters of the local-patch measures.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct LpParams {
     /// Spacing, in voxels, of the variant's patch centres (SSG: 5).
     pub variant_stride: u32,
@@ -924,7 +995,7 @@ impl ExemplarPatches {
 }
 
 /// Scores of one shape's local patches against an exemplar.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LpScores {
     /// Mean over the variant's patches of the best IoU with any exemplar patch.
     pub lp_iou: f64,
@@ -991,17 +1062,62 @@ impl Default for Best {
 /// (bounds prune ~98% of the pairs); up to ~4x more for shapes with no
 /// plausible patches (random voxels), where the bounds prune less.
 pub fn local_patch_scores(variant: &Occupancy, exemplar: &ExemplarPatches, params: &LpParams) -> LpScores {
-    let zero = LpScores { lp_iou: 0.0, lp_iou_above: 0.0, lp_fscore: 0.0, lp_fscore_above: 0.0, patches: 0 };
     if exemplar.is_empty() {
         log::warn!("LP scores: the exemplar has no surface voxels");
-        return zero;
     }
-    let layers = PatchLayers::new(variant);
-    let mut centres = layers.centres(params.variant_stride);
-    if centres.is_empty() {
+    let best = best_patch_matches(variant, exemplar, params);
+    if best.is_empty() {
         log::warn!("LP scores: the variant has no surface voxels");
-        return zero;
     }
+    best.summary(params.threshold)
+}
+
+/// The best IoU and boundary F-score of each sampled patch of one shape
+/// against a dictionary (one entry per sampled patch centre, in the order of
+/// [`patch_centres`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PatchMatches {
+    pub iou: Vec<f64>,
+    pub fscore: Vec<f64>,
+}
+
+impl PatchMatches {
+    pub fn len(&self) -> usize {
+        self.iou.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.iou.is_empty()
+    }
+
+    /// Means and fractions above `threshold`; all 0 without patches.
+    pub fn summary(&self, threshold: f64) -> LpScores {
+        let n = self.len().max(1) as f64;
+        let above = |v: &[f64]| v.iter().filter(|&&x| x > threshold).count() as f64 / n;
+        LpScores {
+            lp_iou: self.iou.iter().sum::<f64>() / n,
+            lp_iou_above: above(&self.iou),
+            lp_fscore: self.fscore.iter().sum::<f64>() / n,
+            lp_fscore_above: above(&self.fscore),
+            patches: self.len(),
+        }
+    }
+
+    /// Patch by patch, the better of two match sets of the same centres (the
+    /// coverage of an exemplar by a SET of variants: each exemplar patch counts
+    /// as found when any variant holds it).
+    pub fn max_with(&self, other: &PatchMatches) -> PatchMatches {
+        assert_eq!(self.len(), other.len(), "patch matches of different centre sets");
+        let m = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x.max(*y)).collect();
+        PatchMatches { iou: m(&self.iou, &other.iou), fscore: m(&self.fscore, &other.fscore) }
+    }
+}
+
+/// The sampled patch centres of a shape: one surface voxel per
+/// `variant_stride`^3 cell, at most `max_patches` of them drawn by a seeded
+/// Fisher-Yates shuffle (deterministic for a given shape and seed).
+fn patch_centres(layers: &PatchLayers, params: &LpParams) -> Vec<[u32; 3]> {
+    let mut centres = layers.centres(params.variant_stride);
     if centres.len() > params.max_patches {
         let mut rng = Rng::new(params.seed);
         for i in 0..params.max_patches {
@@ -1010,19 +1126,26 @@ pub fn local_patch_scores(variant: &Occupancy, exemplar: &ExemplarPatches, param
         }
         centres.truncate(params.max_patches);
     }
-    let patches: Vec<Patch> = centres.par_iter().map(|&c| layers.patch(c)).collect();
-    let best = match_patches(&patches, exemplar);
+    centres
+}
 
-    let n = best.len() as f64;
-    let t = params.threshold;
-    let ious: Vec<f64> = best.iter().map(|b| b.iou_num as f64 / b.iou_den as f64).collect();
-    let fs: Vec<f64> = best.iter().map(|b| b.f_num as f64 / b.f_den as f64).collect();
-    LpScores {
-        lp_iou: ious.iter().sum::<f64>() / n,
-        lp_iou_above: ious.iter().filter(|&&v| v > t).count() as f64 / n,
-        lp_fscore: fs.iter().sum::<f64>() / n,
-        lp_fscore_above: fs.iter().filter(|&&v| v > t).count() as f64 / n,
-        patches: best.len(),
+/// Best matches of the sampled patches of `shape` in `dict` (see
+/// [`local_patch_scores`] for what is sampled and compared). Empty when the
+/// shape has no surface voxels; every score 0 when the dictionary is empty.
+pub fn best_patch_matches(shape: &Occupancy, dict: &ExemplarPatches, params: &LpParams) -> PatchMatches {
+    let layers = PatchLayers::new(shape);
+    let centres = patch_centres(&layers, params);
+    if centres.is_empty() {
+        return PatchMatches::default();
+    }
+    if dict.is_empty() {
+        return PatchMatches { iou: vec![0.0; centres.len()], fscore: vec![0.0; centres.len()] };
+    }
+    let patches: Vec<Patch> = centres.par_iter().map(|&c| layers.patch(c)).collect();
+    let best = match_patches(&patches, dict);
+    PatchMatches {
+        iou: best.iter().map(|b| b.iou_num as f64 / b.iou_den as f64).collect(),
+        fscore: best.iter().map(|b| b.f_num as f64 / b.f_den as f64).collect(),
     }
 }
 
@@ -1232,122 +1355,293 @@ pub fn level_points_normalised(level: &Level) -> Vec<Vec3> {
 // Report
 // ---------------------------------------------------------------------------
 
-/// Scores of one variant.
-#[derive(serde::Serialize, Clone, Debug)]
+/// Scores of one variant (or one rung of the degradation ladder) against the
+/// exemplar. "Precision" compares the shape's patches with the exemplar's
+/// (does everything here look like the exemplar?), "coverage" the exemplar's
+/// with the shape's (is everything of the exemplar here?).
+#[derive(serde::Serialize, serde::Deserialize, Clone, Debug, PartialEq)]
 pub struct VariantScores {
     pub name: String,
-    /// Mean best patch IoU, in [0, 1].
+    /// The literature's LP-IoU (precision, 11^3 patches on the evaluation
+    /// lattice): mean best patch IoU, in [0, 1].
     pub lp_iou: f64,
     /// Fraction of patches whose best IoU > 0.95.
     pub lp_iou_above_95: f64,
-    /// Mean best boundary F-score (1-voxel tolerance), in [0, 1].
+    /// The literature's LP-F: mean best boundary F-score (1-voxel tolerance).
     pub lp_fscore: f64,
     /// Fraction of patches whose best F-score > 0.95.
     pub lp_fscore_above_95: f64,
+    /// Coverage: the exemplar's 11^3 patches matched in this shape.
+    pub coverage: LpScores,
+    /// Precision with 11^3 patches on the half-resolution lattice (each
+    /// spans 22^3 voxels of the evaluation lattice).
+    pub precision_22: LpScores,
+    /// Coverage on the half-resolution lattice.
+    pub coverage_22: LpScores,
+    /// Surface detail of the finest level against the exemplar's.
+    pub detail: DetailScores,
+    /// Colour patches of the finest level against the exemplar's.
+    pub colour: ColourScores,
     /// Chamfer distance of the level-0 point set to the exemplar's, normalised
     /// units (bounding-box diagonal 2); None when not measured.
     pub coarse_chamfer: Option<f64>,
 }
 
-impl VariantScores {
-    pub fn new(name: impl Into<String>, lp: &LpScores, coarse_chamfer: Option<f64>) -> Self {
-        VariantScores {
-            name: name.into(),
-            lp_iou: lp.lp_iou,
-            lp_iou_above_95: lp.lp_iou_above,
-            lp_fscore: lp.lp_fscore,
-            lp_fscore_above_95: lp.lp_fscore_above,
-            coarse_chamfer,
-        }
-    }
+/// Parameters of one evaluation, recorded with its scores.
+#[derive(serde::Serialize, Clone, Debug, PartialEq, Default)]
+pub struct EvalParams {
+    pub lp: LpParams,
+    pub colour: ColourParams,
+}
+
+/// Coverage of the exemplar by the variants as a set: an exemplar patch
+/// counts as found when any variant holds it.
+#[derive(serde::Serialize, serde::Deserialize, Clone, Copy, Debug, PartialEq)]
+pub struct SetCoverage {
+    pub patch_11: LpScores,
+    pub patch_22: LpScores,
 }
 
 /// All scores of one evaluation.
 #[derive(serde::Serialize, Clone, Debug)]
 pub struct EvalReport {
+    /// Every parameter the scores depend on.
+    pub parameters: EvalParams,
     pub variants: Vec<VariantScores>,
-    /// Mean pairwise 1 - IoU over the variants' solid occupancies (higher = more
+    /// Mean of every figure over the variants (name "mean"; the Chamfer mean
+    /// is over the variants that have one).
+    pub mean: VariantScores,
+    /// Mean pairwise 1 - IoU over the variants' occupancies (higher = more
     /// diverse).
     pub diversity: f64,
-    /// Mean of each column over the variants (name "mean"; the Chamfer mean is
-    /// over the variants that have one).
-    pub mean: VariantScores,
+    /// None with fewer than two variants (nothing a set adds).
+    pub set_coverage: Option<SetCoverage>,
 }
 
-/// One variant to evaluate: its occupancy on the exemplar's lattice and,
-/// optionally, its level-0 points in normalised units.
-pub struct VariantInput<'a> {
+/// One shape to evaluate: its occupancy on the evaluation lattice and on the
+/// half-resolution lattice, its finest level, and optionally its level-0
+/// points in normalised units.
+pub struct ShapeInput<'a> {
     pub name: String,
     pub occupancy: &'a Occupancy,
+    pub occupancy_22: &'a Occupancy,
+    pub finest: &'a Level,
     pub coarse_points: Option<&'a [Vec3]>,
 }
 
-/// Everything of METHOD.md section 7 for a set of variants: LP scores of each
-/// against the exemplar (dictionary built once), coarse Chamfer where both point
-/// sets are given, and the diversity of the variants.
-pub fn evaluate(
-    exemplar: &Occupancy,
-    exemplar_coarse: Option<&[Vec3]>,
-    variants: &[VariantInput],
-    params: &LpParams,
-) -> EvalReport {
-    let dict = ExemplarPatches::new(exemplar, params.exemplar_stride);
-    let scores = variants
-        .iter()
-        .map(|v| {
-            same_lattice(v.occupancy, exemplar);
-            let lp = local_patch_scores(v.occupancy, &dict, params);
-            let cd = match (exemplar_coarse, v.coarse_points) {
-                (Some(e), Some(p)) => Some(chamfer(p, e) as f64),
-                _ => None,
-            };
-            VariantScores::new(v.name.clone(), &lp, cd)
-        })
-        .collect();
+/// What makes a voxelisation unusable for comparison, with the shape's name.
+#[derive(thiserror::Error, Debug, Clone, PartialEq)]
+pub enum DegenerateShape {
+    #[error("{0}: nothing to compare: its voxelisation has no surface voxels (empty shape, or every point outside the evaluation lattice)")]
+    NoSurface(String),
+    #[error("{0}: its voxelisation fills {1:.0}% of the evaluation lattice: nothing is left to compare (a solid voxelisation of a surface that is not closed?)")]
+    Filled(String, f64),
+    #[error("{0}: the finest level has no active voxels")]
+    EmptyLevel(String),
+}
+
+/// Above this fraction of the lattice, an occupancy is "everything".
+pub const FILLED_FRACTION: f64 = 0.9;
+
+/// The degenerate cases of item 3: a voxelisation that leaves nothing, or
+/// everything, to compare is an error, never a perfect score.
+pub fn check_shape(s: &ShapeInput) -> Result<(), DegenerateShape> {
+    if !s.finest.mask.iter().any(|&m| m > 0.0) {
+        return Err(DegenerateShape::EmptyLevel(s.name.clone()));
+    }
+    for occ in [s.occupancy, s.occupancy_22] {
+        if occ.surface().count() == 0 {
+            return Err(DegenerateShape::NoSurface(s.name.clone()));
+        }
+        let f = occ.count() as f64 / occ.dims.iter().map(|&d| d as f64).product::<f64>();
+        if f > FILLED_FRACTION {
+            return Err(DegenerateShape::Filled(s.name.clone(), 100.0 * f));
+        }
+    }
+    Ok(())
+}
+
+/// Everything of METHOD.md section 7 and the two-sided measures for a set of
+/// variants: precision and coverage of 11^3 patches on two lattices (the
+/// exemplar's dictionaries built once, one dictionary per variant for
+/// coverage), surface detail, colour patches, coarse Chamfer where both point
+/// sets are given, diversity and the set's coverage. Fails on a degenerate
+/// shape ([`check_shape`]).
+pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalParams) -> Result<EvalReport, DegenerateShape> {
+    check_shape(exemplar)?;
+    for v in variants {
+        check_shape(v)?;
+    }
+    let lp = &params.lp;
+    let (dict, dict_22) = rayon::join(
+        || ExemplarPatches::new(exemplar.occupancy, lp.exemplar_stride),
+        || ExemplarPatches::new(exemplar.occupancy_22, lp.exemplar_stride),
+    );
+    let ex_detail = Variation::of(exemplar.finest);
+    let ex_colour = ColourPatches::of(exemplar.finest);
+    let mut cover_sets: Option<(PatchMatches, PatchMatches)> = None;
+    let mut scores = Vec::with_capacity(variants.len());
+    for v in variants {
+        same_lattice(v.occupancy, exemplar.occupancy);
+        same_lattice(v.occupancy_22, exemplar.occupancy_22);
+        let precision = best_patch_matches(v.occupancy, &dict, lp);
+        let precision_22 = best_patch_matches(v.occupancy_22, &dict_22, lp);
+        let (cover, cover_22) = rayon::join(
+            || best_patch_matches(exemplar.occupancy, &ExemplarPatches::new(v.occupancy, lp.exemplar_stride), lp),
+            || best_patch_matches(exemplar.occupancy_22, &ExemplarPatches::new(v.occupancy_22, lp.exemplar_stride), lp),
+        );
+        let p = precision.summary(lp.threshold);
+        let cd = match (exemplar.coarse_points, v.coarse_points) {
+            (Some(e), Some(c)) => Some(chamfer(c, e) as f64),
+            _ => None,
+        };
+        scores.push(VariantScores {
+            name: v.name.clone(),
+            lp_iou: p.lp_iou,
+            lp_iou_above_95: p.lp_iou_above,
+            lp_fscore: p.lp_fscore,
+            lp_fscore_above_95: p.lp_fscore_above,
+            coverage: cover.summary(lp.threshold),
+            precision_22: precision_22.summary(lp.threshold),
+            coverage_22: cover_22.summary(lp.threshold),
+            detail: DetailScores::new(&Variation::of(v.finest), &ex_detail),
+            colour: colour::colour_scores(&ColourPatches::of(v.finest), &ex_colour, &params.colour),
+            coarse_chamfer: cd,
+        });
+        cover_sets = Some(match cover_sets {
+            None => (cover, cover_22),
+            Some((a, b)) => (a.max_with(&cover), b.max_with(&cover_22)),
+        });
+    }
     let occs: Vec<Occupancy> = variants.iter().map(|v| v.occupancy.clone()).collect();
-    EvalReport::new(scores, diversity(&occs))
+    let set_coverage = cover_sets.filter(|_| variants.len() > 1).map(|(a, b)| SetCoverage {
+        patch_11: a.summary(lp.threshold),
+        patch_22: b.summary(lp.threshold),
+    });
+    Ok(EvalReport::new(params.clone(), scores, diversity(&occs), set_coverage))
+}
+
+/// Mean of JSON values leaf by leaf: numbers averaged (integers stay
+/// integers, rounded), the first value's strings kept, nulls skipped.
+fn mean_json(values: &[serde_json::Value]) -> serde_json::Value {
+    use serde_json::Value;
+    match values.first() {
+        Some(Value::Object(first)) => Value::Object(
+            first
+                .keys()
+                .map(|k| {
+                    let children: Vec<Value> = values.iter().filter_map(|v| v.get(k).cloned()).collect();
+                    (k.clone(), mean_json(&children))
+                })
+                .collect(),
+        ),
+        Some(Value::Number(_)) | Some(Value::Null) => {
+            let nums: Vec<&serde_json::Number> = values.iter().filter_map(|v| v.as_number()).collect();
+            if nums.is_empty() {
+                return Value::Null;
+            }
+            let mean = nums.iter().filter_map(|n| n.as_f64()).sum::<f64>() / nums.len() as f64;
+            if nums.iter().all(|n| n.is_u64()) {
+                Value::from(mean.round() as u64)
+            } else {
+                serde_json::Number::from_f64(mean).map_or(Value::Null, Value::Number)
+            }
+        }
+        Some(other) => other.clone(),
+        None => Value::Null,
+    }
 }
 
 impl EvalReport {
-    pub fn new(variants: Vec<VariantScores>, diversity: f64) -> Self {
-        let n = variants.len().max(1) as f64;
-        let avg = |f: fn(&VariantScores) -> f64| variants.iter().map(f).sum::<f64>() / n;
-        let cds: Vec<f64> = variants.iter().filter_map(|v| v.coarse_chamfer).collect();
-        let mean = VariantScores {
-            name: "mean".into(),
-            lp_iou: avg(|v| v.lp_iou),
-            lp_iou_above_95: avg(|v| v.lp_iou_above_95),
-            lp_fscore: avg(|v| v.lp_fscore),
-            lp_fscore_above_95: avg(|v| v.lp_fscore_above_95),
-            coarse_chamfer: if cds.is_empty() { None } else { Some(cds.iter().sum::<f64>() / cds.len() as f64) },
+    pub fn new(
+        parameters: EvalParams,
+        variants: Vec<VariantScores>,
+        diversity: f64,
+        set_coverage: Option<SetCoverage>,
+    ) -> Self {
+        let rows: Vec<serde_json::Value> =
+            variants.iter().map(|v| serde_json::to_value(v).expect("scores serialise")).collect();
+        let mut mean: VariantScores = match serde_json::from_value(mean_json(&rows)) {
+            Ok(m) if !variants.is_empty() => m,
+            _ => VariantScores::zero(),
         };
-        EvalReport { variants, diversity, mean }
+        mean.name = "mean".into();
+        EvalReport { parameters, variants, mean, diversity, set_coverage }
     }
 
-    /// A plain-text table for the terminal.
+    /// A plain-text table for the terminal: the headline figures; the JSON
+    /// has every figure.
     pub fn table(&self) -> String {
         let width = self.variants.iter().map(|v| v.name.chars().count()).max().unwrap_or(0).max(7);
         let mut s = format!(
-            "{:<width$}  {:>7}  {:>7}  {:>7}  {:>7}  {:>9}\n",
-            "variant", "LP-IoU", ">0.95", "LP-F", ">0.95", "chamfer0"
+            "{:<width$}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>9}\n",
+            "", "LP-IoU", "LP-F", "cover", "cover", "detail", "sharp", "colour", "colour", "chamfer0"
+        );
+        s += &format!(
+            "{:<width$}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>9}\n",
+            "variant", "", ">0.95", "IoU", "IoU 22", "W1 deg", "ratio", "F", "cover", ""
         );
         let row = |v: &VariantScores| {
             let cd = v.coarse_chamfer.map_or("-".to_string(), |c| format!("{c:.4}"));
             format!(
-                "{:<width$}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.3}  {:>9}\n",
-                v.name, v.lp_iou, v.lp_iou_above_95, v.lp_fscore, v.lp_fscore_above_95, cd
+                "{:<width$}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.2}  {:>7.3}  {:>7.3}  {:>7.3}  {:>9}\n",
+                v.name,
+                v.lp_iou,
+                v.lp_fscore_above_95,
+                v.coverage.lp_iou,
+                v.coverage_22.lp_iou,
+                v.detail.w1_deg,
+                v.detail.rms_ratio,
+                v.colour.fscore,
+                v.colour.coverage,
+                cd
             )
         };
         for v in &self.variants {
             s += &row(v);
         }
-        s += &"-".repeat(width + 48);
+        s += &"-".repeat(width + 83);
         s += "\n";
         s += &row(&self.mean);
         let n = self.variants.len();
         s += &format!("diversity (mean 1-IoU over {} pairs): {:.4}\n", n * n.saturating_sub(1) / 2, self.diversity);
-        s += "LP: 11^3-voxel patches, best match in the exemplar; chamfer0: level-0 points, normalised units\n";
+        if let Some(c) = &self.set_coverage {
+            s += &format!(
+                "exemplar covered by the set: IoU {:.3} (22^3: {:.3}), F > 0.95 {:.3}\n",
+                c.patch_11.lp_iou, c.patch_22.lp_iou, c.patch_11.lp_fscore_above
+            );
+        }
+        s += "LP: the variant's 11^3 patches best-matched in the exemplar; cover: the exemplar's matched in the variant\n";
+        s += "(22: on the half-resolution lattice); detail: neighbour-normal angles vs the exemplar's (W1, RMS ratio);\n";
+        s += "colour: colour patches matched both ways (F-score, coverage); chamfer0: level-0 points, normalised units\n";
         s
+    }
+}
+
+impl VariantScores {
+    fn zero() -> Self {
+        let lp = LpScores { lp_iou: 0.0, lp_iou_above: 0.0, lp_fscore: 0.0, lp_fscore_above: 0.0, patches: 0 };
+        VariantScores {
+            name: String::new(),
+            lp_iou: 0.0,
+            lp_iou_above_95: 0.0,
+            lp_fscore: 0.0,
+            lp_fscore_above_95: 0.0,
+            coverage: lp,
+            precision_22: lp,
+            coverage_22: lp,
+            detail: DetailScores { w1_deg: 0.0, rms_ratio: 0.0, mean_deg: 0.0, sharp_fraction: 0.0 },
+            colour: ColourScores {
+                precision: 0.0,
+                coverage: 0.0,
+                fscore: 0.0,
+                distance_to_exemplar: 0.0,
+                distance_from_exemplar: 0.0,
+                sliced_wasserstein: 0.0,
+                spread_ratio: 0.0,
+            },
+            coarse_chamfer: None,
+        }
     }
 }
 
