@@ -2007,39 +2007,117 @@ mod tests {
         assert_eq!(occ.voxels(), vec![[0, 0, 0], [8, 8, 8]]);
     }
 
-    #[test]
-    fn report_table() {
-        let lp = LpScores { lp_iou: 0.9, lp_iou_above: 0.5, lp_fscore: 0.8, lp_fscore_above: 0.25, patches: 1000 };
-        let r = EvalReport::new(
-            vec![VariantScores::new("a", &lp, Some(0.01)), VariantScores::new("variant_b", &lp, None)],
-            0.3,
-        );
-        assert!((r.mean.lp_iou - 0.9).abs() < 1e-12 && r.mean.coarse_chamfer == Some(0.01));
-        let t = r.table();
-        assert!(t.contains("variant_b") && t.contains("0.900") && t.contains("mean") && t.contains("0.3000"), "{t}");
-        assert!(t.contains("over 1 pairs"));
+    fn scores(name: &str, lp_iou: f64, chamfer: Option<f64>) -> VariantScores {
+        VariantScores { name: name.into(), lp_iou, coarse_chamfer: chamfer, ..VariantScores::zero() }
     }
 
     #[test]
-    fn evaluate_end_to_end() {
+    fn report_table_and_means() {
+        let mut a = scores("a", 0.9, Some(0.01));
+        a.coverage.patches = 1000;
+        let mut b = scores("variant_b", 0.5, None);
+        b.coverage.patches = 999;
+        let r = EvalReport::new(EvalParams::default(), vec![a, b], 0.3, None);
+        assert!((r.mean.lp_iou - 0.7).abs() < 1e-12 && r.mean.coarse_chamfer == Some(0.01));
+        assert_eq!(r.mean.coverage.patches, 1000, "integer figures stay integers (rounded)");
+        let t = r.table();
+        assert!(t.contains("variant_b") && t.contains("0.900") && t.contains("mean") && t.contains("0.3000"), "{t}");
+        assert!(t.contains("over 1 pairs"));
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["parameters"]["lp"]["variant_stride"], 5, "parameters are recorded: {json}");
+    }
+
+    /// A level whose active voxels are the surface voxels of `occ` (normals +z,
+    /// one colour), on a lattice that matches the level's grid.
+    fn level_of(occ: &Occupancy) -> Level {
+        let s = occ.surface().voxels();
+        Level {
+            resolution: 64,
+            coords: s.iter().map(|v| glam::IVec3::new(v[0] as i32, v[1] as i32, v[2] as i32)).collect(),
+            offsets: vec![Vec3::ZERO; s.len()],
+            normals: vec![Vec3::Z; s.len()],
+            colours: vec![Vec3::splat(0.5); s.len()],
+            mask: vec![1.0; s.len()],
+            ..Default::default()
+        }
+    }
+
+    fn halve(occ: &Occupancy) -> Occupancy {
+        let mut h = Occupancy::empty(occ.dims.map(|d| d.div_ceil(2)));
+        for v in occ.voxels() {
+            h.set(v[0] as i64 / 2, v[1] as i64 / 2, v[2] as i64 / 2);
+        }
+        h
+    }
+
+    #[test]
+    fn evaluate_end_to_end_with_coverage() {
         let grid = unit_grid(64);
         let ex = smooth_shape(&grid, Vec3::ZERO);
         let v1 = smooth_shape(&grid, Vec3::new(2.0, 0.0, 0.0) * grid.voxel);
+        // Half the exemplar: its patches are all in the exemplar (precision
+        // high), but half of the exemplar is missing (coverage lower).
+        let mut part = Occupancy::empty(ex.dims);
+        for v in ex.voxels().into_iter().filter(|v| v[0] < 32) {
+            part.set(v[0] as i64, v[1] as i64, v[2] as i64);
+        }
         let pts = vec![Vec3::ZERO, Vec3::X];
         let shifted = vec![Vec3::new(0.0, 0.1, 0.0), Vec3::new(1.0, 0.1, 0.0)];
+        let (exh, v1h, parth) = (halve(&ex), halve(&v1), halve(&part));
+        let (lex, lv1, lpart) = (level_of(&ex), level_of(&v1), level_of(&part));
+        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c };
         let r = evaluate(
-            &ex,
-            Some(&pts),
+            &shape("exemplar", &ex, &exh, &lex, Some(&pts)),
             &[
-                VariantInput { name: "same".into(), occupancy: &ex, coarse_points: Some(&pts) },
-                VariantInput { name: "moved".into(), occupancy: &v1, coarse_points: Some(&shifted) },
+                shape("same", &ex, &exh, &lex, Some(&pts)),
+                shape("moved", &v1, &v1h, &lv1, Some(&shifted)),
+                shape("part", &part, &parth, &lpart, None),
             ],
-            &LpParams::default(),
-        );
-        assert_eq!(r.variants[0].lp_iou, 1.0);
-        assert_eq!(r.variants[0].coarse_chamfer, Some(0.0));
-        assert!((r.variants[1].coarse_chamfer.unwrap() - 0.1).abs() < 1e-6);
+            &EvalParams::default(),
+        )
+        .unwrap();
+        let [same, moved, part] = [&r.variants[0], &r.variants[1], &r.variants[2]];
+        assert_eq!((same.lp_iou, same.coverage.lp_iou, same.coverage_22.lp_iou), (1.0, 1.0, 1.0));
+        assert_eq!(same.detail.w1_deg, 0.0);
+        assert_eq!(same.coarse_chamfer, Some(0.0));
+        assert!((moved.coarse_chamfer.unwrap() - 0.1).abs() < 1e-6);
+        assert!(part.lp_iou > 0.9, "a part of the exemplar is plausible: {part:?}");
+        assert!(part.coverage.lp_iou < part.lp_iou - 0.1, "but covers less: {part:?}");
         assert!(r.diversity > 0.0);
+        let set = r.set_coverage.expect("three variants");
+        assert_eq!(set.patch_11.lp_iou, 1.0, "the set holds the exemplar itself");
+    }
+
+    #[test]
+    fn degenerate_voxelisations_are_errors() {
+        let grid = unit_grid(16);
+        let ex = smooth_shape(&grid, Vec3::ZERO);
+        let mut full = Occupancy::empty(ex.dims);
+        full.bits.iter_mut().for_each(|w| *w = u64::MAX);
+        let full = Occupancy { bits: full.bits.iter().map(|&w| w & last_word_mask(16)).collect(), ..full };
+        let empty = Occupancy::empty(ex.dims);
+        let l = level_of(&ex);
+        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None };
+        assert!(matches!(check_shape(&shape(&empty)), Err(DegenerateShape::NoSurface(_))));
+        let e = check_shape(&shape(&full)).unwrap_err();
+        assert!(matches!(e, DegenerateShape::Filled(..)) && e.to_string().contains("fills 100%"), "{e}");
+        assert!(check_shape(&shape(&ex)).is_ok());
+        let empty_level = Level { resolution: 16, ..Default::default() };
+        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None };
+        assert!(matches!(check_shape(&s), Err(DegenerateShape::EmptyLevel(_))));
+    }
+
+    #[test]
+    fn covering_lattice_aligns_with_a_level_grid() {
+        let g = OccupancyGrid::covering(Frame::default(), Vec3::splat(-0.3), Vec3::new(0.5, 0.2, 0.1), 2.0 / 64.0, 0.1, Some(-1.0));
+        for a in 0..3 {
+            let k = (g.origin[a] + 1.0) / g.voxel;
+            assert!((k - k.round()).abs() < 1e-4, "origin on a grid line: {g:?}");
+            assert!(g.origin[a] <= -0.4 + 1e-6);
+        }
+        assert!(g.origin.x + g.dims[0] as f32 * g.voxel >= 0.6 - 1e-6);
+        let h = g.halved();
+        assert_eq!((h.voxel, h.origin), (g.voxel * 2.0, g.origin));
     }
 
     /// The pruned matcher returns exactly the exhaustive maxima.

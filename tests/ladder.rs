@@ -1,0 +1,83 @@
+//! The quality instrument on the embedded demo exemplar (so it runs wherever
+//! the tests run): every measure ranks the degradation ladder as expected,
+//! the literature's precision-only scores are shown not to, and the
+//! `ladder` and contact-sheet commands work as a user runs them.
+
+mod common;
+
+use common::*;
+use shapeshifter::config::Config;
+use shapeshifter::ladder::Rung;
+use shapeshifter::{exemplar, pipeline};
+
+/// The demo exemplar encoded as `run` encodes it with the cpu profile.
+fn encoded_demo(dir: &std::path::Path) -> (std::path::PathBuf, Config) {
+    let config = Config::load("cpu", &[]).unwrap();
+    let mesh = exemplar::ruined_tower(&Default::default());
+    let enc = dir.join("exemplar");
+    pipeline::encode_stage(&mesh, "demo", "0", &config, &enc).unwrap();
+    (enc, config)
+}
+
+#[test]
+fn every_measure_ranks_the_demo_ladder_as_expected() {
+    let dir = tempfile::tempdir().unwrap();
+    let (enc, config) = encoded_demo(dir.path());
+    let out = dir.path().join("ladder");
+    let outcome = pipeline::ladder_stage(&enc, &out, Some(&config), tch::Device::Cpu).unwrap();
+    let rows = &outcome.evaluation.report.variants;
+    let names: Vec<&str> = rows.iter().map(|r| r.name.as_str()).collect();
+    for r in [Rung::Exemplar, Rung::SmoothWeak, Rung::SmoothStrong, Rung::WashedOut, Rung::ShuffledColours, Rung::Blob] {
+        assert!(names.contains(&r.name()), "rung {} scored: {names:?}", r.name());
+        assert!(out.join(r.name()).join("level_3.vdb").is_file(), "rung folder {}", r.name());
+    }
+    // Every expectation was tested (geometry and colour), and every one holds.
+    assert!(outcome.checks.len() >= 24, "{} checks", outcome.checks.len());
+    assert!(outcome.checks.iter().any(|c| c.metric.starts_with("colour.") && c.rung == "shuffled_colours"));
+    assert!(outcome.checks.iter().any(|c| c.metric.starts_with("detail.") && c.rung == "blob"));
+    let failed: Vec<String> = outcome
+        .failed()
+        .map(|c| format!("{} on {}: {:.4} vs exemplar {:.4} ({})", c.metric, c.rung, c.value, c.exemplar, c.requirement))
+        .collect();
+    assert!(failed.is_empty(), "measures that do not rank the ladder:\n{}", failed.join("\n"));
+    // The defect this instrument fixes: the literature's precision-only
+    // boundary score rates the smoothed rung as high as the exemplar.
+    let get = |r: Rung| rows.iter().find(|v| v.name == r.name()).unwrap();
+    assert!(get(Rung::SmoothStrong).lp_fscore_above_95 > 0.9, "LP-F > 0.95 cannot see a blur");
+    assert!(out.join("contact_sheet.png").is_file() && out.join("ladder.json").is_file());
+    let sheet = image::open(out.join("contact_sheet.png")).unwrap();
+    assert!(sheet.width() > 6 * 320 && sheet.height() > 2 * 320, "{}x{}", sheet.width(), sheet.height());
+}
+
+#[test]
+fn ladder_and_contact_sheet_commands() {
+    let dir = tempfile::tempdir().unwrap();
+    let (enc, _) = encoded_demo(dir.path());
+    let out = dir.path().join("lad");
+    let o = shapeshifter(&["ladder", enc.to_str().unwrap(), "-o", out.to_str().unwrap(), "--profile", "none"]);
+    assert!(o.status.success(), "{}\n{}", stdout(&o), stderr(&o));
+    let text = stdout(&o);
+    assert!(text.contains("expected order:") && text.contains("smooth_strong") && text.contains("skipped: untrained"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("ladder.json")).unwrap()).unwrap();
+    assert!(json["evaluation"]["parameters"]["colour"]["k"].is_number() && json["evaluation"]["lattice"]["dims"].is_array());
+
+    // A contact sheet from folders, the exemplar first.
+    let png = dir.path().join("sheet.png");
+    let o = shapeshifter(&[
+        "render", enc.to_str().unwrap(), out.join("blob").to_str().unwrap(), out.join("washed_out").to_str().unwrap(),
+        "-o", png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let sheet = image::open(&png).unwrap();
+    assert!(sheet.width() >= 3 * 320, "{}", sheet.width());
+
+    // Bad input: one clear line, nothing written.
+    let bad = dir.path().join("nothing_here");
+    std::fs::create_dir(&bad).unwrap();
+    let png2 = dir.path().join("bad.png");
+    let o = shapeshifter(&["render", enc.to_str().unwrap(), bad.to_str().unwrap(), "-o", png2.to_str().unwrap()]);
+    assert_clean_failure(&o, "nothing_here", "holds no level_K.vdb files");
+    assert!(!png2.exists());
+    let o = shapeshifter(&["ladder", bad.to_str().unwrap(), "-o", dir.path().join("l2").to_str().unwrap(), "--profile", "none"]);
+    assert_clean_failure(&o, "nothing_here", "manifest");
+}
