@@ -102,6 +102,8 @@ pub struct Lattice {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Evaluation {
     pub lattice: Lattice,
+    /// Variants that could not be scored, each with the reason.
+    pub unscored: Vec<String>,
     #[serde(flatten)]
     pub report: EvalReport,
 }
@@ -117,12 +119,13 @@ impl Evaluation {
     pub fn table(&self) -> String {
         let l = &self.lattice;
         format!(
-            "voxelisation: {:?}{} on {}x{}x{} voxels\n{}",
+            "voxelisation: {:?}{} on {}x{}x{} voxels\n{}{}",
             l.voxelisation,
             if l.voxelisation == Voxelisation::Solid && !l.filled { " (open exemplar: surfaces only)" } else { "" },
             l.dims[0],
             l.dims[1],
             l.dims[2],
+            self.unscored.iter().map(|u| format!("not scored: {u}\n")).collect::<String>(),
             self.report.table()
         )
     }
@@ -213,6 +216,18 @@ pub fn evaluate(
             coarse_points: Some(c),
         })
         .collect();
+    metrics::check_shape(&exemplar).map_err(|e| Error::Invalid(format!("the exemplar cannot be scored: {e}")))?;
+    // A degenerate variant (empty, or filling the lattice) is reported, not
+    // scored: a score for it would be meaningless, and the rest still count.
+    let (inputs, unscored): (Vec<ShapeInput>, Vec<ShapeInput>) =
+        inputs.into_iter().partition(|v| metrics::check_shape(v).is_ok());
+    let unscored: Vec<String> = unscored.iter().filter_map(|v| metrics::check_shape(v).err()).map(|e| e.to_string()).collect();
+    for u in &unscored {
+        log::warn!("eval: not scored: {u}");
+    }
+    if inputs.is_empty() {
+        return Err(Error::Invalid(format!("no variant can be scored: {}", unscored.join("; "))));
+    }
     let report = metrics::evaluate(&exemplar, &inputs, &EvalParams::default()).map_err(|e| Error::Invalid(e.to_string()))?;
-    Ok(Evaluation { lattice: Lattice { voxelisation: mode, filled, dims: grid.dims, voxel: grid.voxel }, report })
+    Ok(Evaluation { lattice: Lattice { voxelisation: mode, filled, dims: grid.dims, voxel: grid.voxel }, unscored, report })
 }

@@ -362,6 +362,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
         })
         .collect();
     let evaluation = crate::evaluate::evaluate(exemplar_dir, None, &files, 256)?;
+    skipped.extend(evaluation.unscored.iter().cloned());
     let finest = &levels[levels.len() - 1];
     let colourful = crate::metrics::colour::spread(&finest.colours) > 0.02;
     if !colourful {
