@@ -126,6 +126,7 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     for stem in ["tower", "tower2"] {
         assert!(out.join(stem).join("variants/variant_000/level_0.vdb").is_file(), "{stem} has no result: {err}");
         assert!(out.join(stem).join("eval.json").is_file());
+        assert!(out.join(stem).join("contact_sheet.png").is_file());
     }
     assert!(!out.join("corrupt").join("eval.json").exists());
 }

@@ -2109,6 +2109,24 @@ mod tests {
     }
 
     #[test]
+    fn surface_voxelisation_keeps_sheets_and_hollows_solids() {
+        let grid = unit_grid(32);
+        let b = cube(Vec3::splat(-0.5), Vec3::splat(0.5));
+        let solid = voxelise_mesh(&b, &grid);
+        let shell = voxelise_mesh_surface(&b, &grid);
+        // 16^3 cube (plus the touched boundary layer) vs its one-voxel shell.
+        assert!(solid.count() >= 16 * 16 * 16, "{}", solid.count());
+        assert!(shell.count() < solid.count() / 2 && shell.count() >= 6 * 15 * 15, "{}", shell.count());
+        assert!(!shell.get(16, 16, 16), "nothing inside");
+        // An open sheet: the same voxels whichever way (nothing to fill).
+        let sheet = mesh(
+            vec![Vec3::new(-0.5, -0.5, 0.01), Vec3::new(0.5, -0.5, 0.01), Vec3::new(0.5, 0.5, 0.01), Vec3::new(-0.5, 0.5, 0.01)],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        assert_eq!(voxelise_mesh_surface(&sheet, &grid), voxelise_mesh(&sheet, &grid));
+    }
+
+    #[test]
     fn covering_lattice_aligns_with_a_level_grid() {
         let g = OccupancyGrid::covering(Frame::default(), Vec3::splat(-0.3), Vec3::new(0.5, 0.2, 0.1), 2.0 / 64.0, 0.1, Some(-1.0));
         for a in 0..3 {
