@@ -109,6 +109,8 @@ pub struct DetailScores {
     pub rms_ratio: f64,
     /// Mean neighbour angle of this shape, degrees.
     pub mean_deg: f64,
+    /// RMS neighbour angle of this shape, degrees.
+    pub rms_deg: f64,
     /// Fraction of voxels turning by more than 20 degrees.
     pub sharp_fraction: f64,
 }
@@ -121,6 +123,7 @@ impl DetailScores {
             w1_deg: wasserstein_1d(shape, exemplar),
             rms_ratio: super::colour::ratio(shape.rms(), er),
             mean_deg: shape.mean(),
+            rms_deg: shape.rms(),
             sharp_fraction: shape.sharp_fraction(),
         }
     }

@@ -1630,7 +1630,7 @@ impl VariantScores {
             coverage: lp,
             precision_22: lp,
             coverage_22: lp,
-            detail: DetailScores { w1_deg: 0.0, rms_ratio: 0.0, mean_deg: 0.0, sharp_fraction: 0.0 },
+            detail: DetailScores { w1_deg: 0.0, rms_ratio: 0.0, mean_deg: 0.0, rms_deg: 0.0, sharp_fraction: 0.0 },
             colour: ColourScores {
                 precision: 0.0,
                 coverage: 0.0,
