@@ -139,6 +139,10 @@ pub enum Command {
         /// Number of variants.
         #[arg(short, default_value_t = 10)]
         n: usize,
+        /// Index of the first variant: `--first 5 -n 5` writes variant_005 ..
+        /// variant_009, exactly as `-n 10` writes them (a shard of a job array).
+        #[arg(long, default_value_t = 0)]
+        first: usize,
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Per-axis scale of the coarse grid: X,Y,Z (2,1,1 = twice as long in x).
@@ -532,13 +536,14 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Sample { dir, output, models, n, seed, extent, stop_level, from, preview, overrides, device: dev } => {
+        Command::Sample { dir, output, models, n, first, seed, extent, stop_level, from, preview, overrides, device: dev } => {
             let models = models.unwrap_or_else(|| dir.join("models"));
             let config = Config::read(&models.join("config.toml"))?.with_overrides(&overrides)?;
             let device = device(&dev)?;
             let (manifest, levels) = dataset::read(&dir)?;
             let ext = edit::parse_vec3(&extent).ok_or_else(|| anyhow::anyhow!("--extent '{extent}': expected X,Y,Z"))?;
             let mut options = SampleOptions::from_config(&config, n, seed);
+            options.first = first;
             options.extent = ext;
             options.stop_level = stop_level;
             let from_level = from.as_deref().map(vdb::read_level).transpose()?.map(|(l, _)| l);
@@ -554,7 +559,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     config_digest: config.digest(),
                     exemplar_open: manifest.open_surface,
                 };
-                pipeline::write_variant(&pipeline::variant_dir(&output, i), v, &provenance, preview)?;
+                pipeline::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview)?;
             }
             println!("{} variants -> {}", variants.len(), output.display());
             Ok(ExitCode::SUCCESS)

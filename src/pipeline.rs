@@ -169,7 +169,10 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
     Ok(())
 }
 
-/// Samples `options.n` variants into `variants_dir/variant_XXX/`.
+/// Samples variants `options.first .. first + n` into
+/// `variants_dir/variant_XXX/` (XXX = the variant's index). Each variant
+/// folder is stamped on its own, so shards written by different jobs fill one
+/// folder and a re-run skips what is already there.
 #[allow(clippy::too_many_arguments)]
 pub fn sample_stage(
     exemplar_levels: &[Level],
@@ -182,31 +185,43 @@ pub fn sample_stage(
     options: &SampleOptions,
     previews: bool,
 ) -> Result<Vec<PathBuf>> {
-    let d = digest(&[
+    let indices: Vec<usize> = (options.first..options.first + options.n).collect();
+    let dirs: Vec<PathBuf> = indices.iter().map(|&i| variant_dir(variants_dir, i)).collect();
+    // What a variant depends on: the configuration, the trained models, the
+    // sampling options except which shard computed it, and its index.
+    let common = digest(&[
         &config.digest(),
         &std::fs::read_to_string(train::state_path(models_dir, exemplar_levels.len() - 1)).unwrap_or_default(),
-        &format!("{:?}", options),
+        &format!("{:?}", SampleOptions { first: 0, n: 0, ..options.clone() }),
     ]);
-    let dirs: Vec<PathBuf> = (0..options.n).map(|i| variant_dir(variants_dir, i)).collect();
-    if is_done(variants_dir, "sample", &d) {
-        log::info!("sample: reusing {}", variants_dir.display());
+    let todo: Vec<usize> = indices
+        .iter()
+        .zip(&dirs)
+        .filter(|(i, d)| !is_done(d, "sample", &digest(&[&common, &i.to_string()])))
+        .map(|(&i, _)| i)
+        .collect();
+    if todo.is_empty() {
+        log::info!("sample: reusing {} variants in {}", dirs.len(), variants_dir.display());
         return Ok(dirs);
     }
     let t = Instant::now();
     let levels = options.stop_level.map_or(exemplar_levels.len(), |k| k + 1);
     let models = sample::load_models(models_dir, config, levels, device)?;
-    let variants = sample::sample(&models, exemplar_levels, options, None)?;
-    for (i, v) in variants.iter().enumerate() {
-        let provenance = Provenance {
-            exemplar: exemplar_name.into(),
-            seed: Some(options.seed),
-            config_digest: config.digest(),
-            exemplar_open,
-        };
-        write_variant(&dirs[i], v, &provenance, previews)?;
+    let provenance = Provenance {
+        exemplar: exemplar_name.into(),
+        seed: Some(options.seed),
+        config_digest: config.digest(),
+        exemplar_open,
+    };
+    for &i in &todo {
+        let tv = Instant::now();
+        let one = SampleOptions { first: i, n: 1, ..options.clone() };
+        let v = sample::sample(&models, exemplar_levels, &one, None)?;
+        let dir = variant_dir(variants_dir, i);
+        write_variant(&dir, &v[0], &provenance, previews)?;
+        mark_done(&dir, "sample", &digest(&[&common, &i.to_string()]), tv.elapsed().as_secs_f64())?;
     }
-    log::info!("sample: {} variants in {:.1} s", options.n, t.elapsed().as_secs_f64());
-    mark_done(variants_dir, "sample", &d, t.elapsed().as_secs_f64())?;
+    log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
     Ok(dirs)
 }
 

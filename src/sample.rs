@@ -1,19 +1,24 @@
 //! @brief Sampling variants coarse to fine (METHOD.md section 5).
 //!
 //! 1. Level 0: the dense box of the exemplar's level 0, resized per axis by
-//!    `extent` around its centre (the anisotropic control), n copies batched, filled
-//!    with N(0, 1); the reverse process from t = 1 with `level0_steps` steps; prune
-//!    (mask > 0 kept, mask set to 1).
+//!    `extent` around its centre (the anisotropic control), filled with N(0, 1);
+//!    the reverse process from t = 1 with `level0_steps` steps; prune (mask > 0
+//!    kept, mask set to 1).
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
 //!    process from there with `upper_steps` steps; prune.
-//! 3. Every stage's pruned grid is returned, split per variant, as a [`Level`] in the
-//!    exemplar's frame, so a caller can stop, edit a level and continue from it.
+//! 3. Every stage's pruned grid is returned as a [`Level`] in the exemplar's frame,
+//!    so a caller can stop, edit a level and continue from it.
 //!
-//! All variants run as one batch (items never mix: the grid keeps them apart).
-//! Each stage reseeds libtorch's generator from (seed, stage), so the same seed on the
-//! same device gives the same variants, and continuing from an unedited level
-//! reproduces the finer levels of the uninterrupted run.
+//! Each variant is sampled alone, from its own seed ([`variant_seed`] of the run's
+//! seed and its index) and its own noise (drawn on the CPU from that seed, the
+//! level and the step, not from libtorch's global generator). So variant i is the
+//! same whichever shard computes it (`sample --first K -n N` on another machine
+//! writes exactly what one `sample -n` writes, for the same libtorch thread count
+//! and device), and continuing from an unedited level reproduces the finer levels
+//! of the uninterrupted run. Batching variants would save little on a CPU (the
+//! matrix products are as efficient for one variant's rows as for ten) and would
+//! tie each variant's floating-point results to its batch.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -97,8 +102,11 @@ pub fn untrained_models(config: &Config, levels: usize, device: Device, seed: u6
 /// What to sample.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SampleOptions {
+    /// Index of the first variant (a shard of a larger set: `--first K`).
+    pub first: usize,
     /// Number of variants.
     pub n: usize,
+    /// The run's seed; variant i uses [`variant_seed`]`(seed, i)`.
     pub seed: u64,
     /// Per-axis scale of the level-0 box (1, 1, 1 = the exemplar's extent).
     pub extent: [f32; 3],
@@ -116,6 +124,7 @@ impl SampleOptions {
     /// The configuration's sampler and step counts, extent 1.
     pub fn from_config(config: &Config, n: usize, seed: u64) -> Self {
         SampleOptions {
+            first: 0,
             n,
             seed,
             extent: [1.0; 3],
@@ -172,98 +181,124 @@ pub fn sample(
     }
     let sampler =
         sampler(&opts.sampler).ok_or_else(|| Error::Invalid(format!("unknown sampler '{}'", opts.sampler)))?;
-    let dev = models.device;
-    let mut out: Vec<Vec<Level>> = vec![Vec::new(); opts.n];
+    if let Some(level) = &from {
+        let k = level.index;
+        if k >= last {
+            return Err(Error::Invalid(format!("continuing from level {k}: nothing finer to do (last level {last})")));
+        }
+        if let Some(ex) = exemplar_levels.get(k) {
+            if ex.resolution != level.resolution {
+                return Err(Error::Invalid(format!(
+                    "level {k} to continue from has resolution {}, the exemplar's level {k} has {}",
+                    level.resolution, ex.resolution
+                )));
+            }
+        }
+    }
+    let box0 = level0_box(exemplar0, opts.extent)?;
+    tch::no_grad(|| {
+        (opts.first..opts.first + opts.n)
+            .map(|i| {
+                let job = OneVariant { models, frame, last, box0, sampler: sampler.as_ref(), seed: variant_seed(opts.seed, i) };
+                job.run(exemplar0.resolution, opts, from.as_ref())
+            })
+            .collect()
+    })
+}
 
-    tch::no_grad(|| -> Result<()> {
+/// The seed of variant `index` of a run with seed `run_seed`: variants are
+/// sampled one at a time from their own seeds, so any shard of indices
+/// (`--first K -n N`) reproduces exactly what one `sample -n` writes.
+pub fn variant_seed(run_seed: u64, index: usize) -> u64 {
+    mix_seed(run_seed, index as u64, 7, 0)
+}
+
+/// Standard normal noise of `rows` x 10 from SplitMix64 and Box-Muller on the
+/// CPU, seeded by (variant seed, level, step): independent of libtorch's
+/// global generator, of the batch and of the device, so a variant's noise is
+/// the same wherever and with whatever else it is sampled.
+fn gaussian(rows: usize, seed: u64, level: usize, step: usize, device: Device) -> Tensor {
+    let mut rng = crate::rng::Rng::new(mix_seed(seed, level as u64, 8, step as u64));
+    let n = rows * FEATURE_CHANNELS;
+    let mut v = Vec::with_capacity(n + 1);
+    while v.len() < n {
+        // Box-Muller: two normals from two uniforms in (0, 1].
+        let u1 = 1.0 - rng.uniform();
+        let u2 = rng.uniform();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let a = std::f64::consts::TAU * u2;
+        v.push((r * a.cos()) as f32);
+        v.push((r * a.sin()) as f32);
+    }
+    v.truncate(n);
+    Tensor::from_slice(&v).view([rows as i64, FEATURE_CHANNELS as i64]).to_device(device)
+}
+
+/// Everything one variant's coarse-to-fine pass needs.
+struct OneVariant<'a> {
+    models: &'a Models,
+    frame: crate::level::Frame,
+    last: usize,
+    box0: (IVec3, IVec3),
+    sampler: &'a dyn Sampler,
+    seed: u64,
+}
+
+impl OneVariant<'_> {
+    fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
+        let dev = self.models.device;
+        let mut out = Vec::new();
         let (mut cur, first) = match from {
             None => {
-                tch::manual_seed(mix_seed(opts.seed, 0, 3, 0) as i64);
-                let (lo, size) = level0_box(exemplar0, opts.extent)?;
-                let bx = SparseGrid::full_box(exemplar0.resolution, lo, size).map_err(|e| Error::Invalid(e.to_string()))?;
-                let grids: Vec<&SparseGrid> = (0..opts.n).map(|_| &bx).collect();
-                let grid = Arc::new(SparseGrid::batch(&grids).map_err(|e| Error::Invalid(e.to_string()))?);
-                let noise = Tensor::randn([grid.len() as i64, FEATURE_CHANNELS as i64], (Kind::Float, dev));
-                let x = SparseTensor::new(grid, noise).map_err(sparse_err)?;
-                let x = reverse(&models.diffusion[0].net, x, 1.0, opts.level0_steps, sampler.as_ref())?;
+                let (lo, size) = self.box0;
+                let bx = SparseGrid::full_box(resolution0, lo, size).map_err(|e| Error::Invalid(e.to_string()))?;
+                let noise = gaussian(bx.len(), self.seed, 0, 0, dev);
+                let x = SparseTensor::new(Arc::new(bx), noise).map_err(sparse_err)?;
+                let x = self.reverse(0, x, 1.0, opts.level0_steps)?;
                 let pruned = x.prune_by_mask().map_err(sparse_err)?;
-                push_levels(&mut out, &pruned, 0, frame)?;
+                out.push(pruned.to_level(0, self.frame).map_err(sparse_err)?);
                 (pruned, 1)
             }
             Some(level) => {
-                let k = level.index;
-                if k >= last {
-                    return Err(Error::Invalid(format!(
-                        "continuing from level {k}: nothing finer to do (last level {last})"
-                    )));
-                }
-                if let Some(ex) = exemplar_levels.get(k) {
-                    if ex.resolution != level.resolution {
-                        return Err(Error::Invalid(format!(
-                            "level {k} to continue from has resolution {}, the exemplar's level {k} has {}",
-                            level.resolution, ex.resolution
-                        )));
-                    }
-                }
-                let one = SparseTensor::from_level(&level, dev).map_err(sparse_err)?.prune_by_mask().map_err(sparse_err)?;
-                let items: Vec<&SparseTensor> = (0..opts.n).map(|_| &one).collect();
-                (SparseTensor::batch(&items).map_err(sparse_err)?, k + 1)
+                let one = SparseTensor::from_level(level, dev).map_err(sparse_err)?.prune_by_mask().map_err(sparse_err)?;
+                (one, level.index + 1)
             }
         };
-        for l in first..=last {
-            tch::manual_seed(mix_seed(opts.seed, l as u64, 3, 0) as i64);
+        for l in first..=self.last {
             if cur.is_empty() {
                 let empty = SparseTensor::new(
                     Arc::new(SparseGrid::empty(cur.grid.resolution() * 2)),
                     Tensor::zeros([0, FEATURE_CHANNELS as i64], (Kind::Float, dev)),
                 )
                 .map_err(sparse_err)?;
-                for v in out.iter_mut() {
-                    v.push(empty.to_level(l, frame).map_err(sparse_err)?);
-                }
+                out.push(empty.to_level(l, self.frame).map_err(sparse_err)?);
                 cur = empty;
                 continue;
             }
-            let up = models.upsamplers[l]
+            let up = self.models.upsamplers[l]
                 .as_ref()
                 .ok_or_else(|| Error::Invalid(format!("level {l} has no upsampler")))?;
             let u = up.net.forward_t(&cur, false)?;
-            let eps = u.feats.randn_like();
+            let eps = gaussian(u.len(), self.seed, l, 0, dev);
             let x = u.with_feats(noise_to(&u.feats, opts.upper_t_max, &eps)).map_err(sparse_err)?;
-            let x = reverse(&models.diffusion[l].net, x, opts.upper_t_max, opts.upper_steps, sampler.as_ref())?;
+            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps)?;
             cur = x.prune_by_mask().map_err(sparse_err)?;
-            push_levels(&mut out, &cur, l, frame)?;
+            out.push(cur.to_level(l, self.frame).map_err(sparse_err)?);
         }
-        Ok(())
-    })?;
-    Ok(out)
+        Ok(out)
+    }
+
+    /// The reverse process of level `l` from `t_max` to 0 in `steps` steps.
+    fn reverse(&self, l: usize, mut x: SparseTensor, t_max: f64, steps: usize) -> Result<SparseTensor> {
+        let net = &self.models.diffusion[l].net;
+        let times = reverse_times(t_max, steps);
+        for (k, w) in times.windows(2).enumerate() {
+            let x0_hat = net.forward_at(&x, w[0], false)?;
+            let noise = gaussian(x.len(), self.seed, l, k + 1, self.models.device);
+            let next = self.sampler.step(&x.feats, &x0_hat.feats, w[0], w[1], &noise);
+            x = x.with_feats(next).map_err(sparse_err)?;
+        }
+        Ok(x)
+    }
 }
 
-/// The reverse process from `t_max` to 0 in `steps` steps.
-fn reverse(
-    net: &DiffusionNet,
-    mut x: SparseTensor,
-    t_max: f64,
-    steps: usize,
-    sampler: &dyn Sampler,
-) -> Result<SparseTensor> {
-    let times = reverse_times(t_max, steps);
-    for w in times.windows(2) {
-        let x0_hat = net.forward_at(&x, w[0], false)?;
-        let noise = x.feats.randn_like();
-        let next = sampler.step(&x.feats, &x0_hat.feats, w[0], w[1], &noise);
-        x = x.with_feats(next).map_err(sparse_err)?;
-    }
-    Ok(x)
-}
-
-fn push_levels(out: &mut [Vec<Level>], x: &SparseTensor, index: usize, frame: crate::level::Frame) -> Result<()> {
-    let items = x.split();
-    if items.len() != out.len() {
-        return Err(Error::Invalid(format!("{} variants expected, {} in the batch", out.len(), items.len())));
-    }
-    for (v, item) in out.iter_mut().zip(items) {
-        v.push(item.to_level(index, frame).map_err(sparse_err)?);
-    }
-    Ok(())
-}

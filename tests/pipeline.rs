@@ -185,6 +185,11 @@ fn sampling_is_reproducible_and_follows_options() {
     }
     assert!(a.iter().map(|v| v[0].len()).sum::<usize>() > 0, "nothing sampled");
     assert!(same(&a, &b), "same seed, different output");
+    // Shards: variants 1..3 and 2 alone are exactly those of the full set, bit for bit.
+    let shard = sample(&models, &levels, &SampleOptions { first: 1, n: 2, ..opts.clone() }, None).unwrap();
+    assert!(same(&shard, &a[1..3]), "a shard differs from the same variants of the whole set");
+    let one = sample(&models, &levels, &SampleOptions { first: 2, n: 1, ..opts.clone() }, None).unwrap();
+    assert!(same(&one, &a[2..3]) && one[0][1].mask == a[2][1].mask);
     let c = sample(&models, &levels, &SampleOptions { seed: 8, ..opts.clone() }, None).unwrap();
     assert!(!same(&a, &c), "different seed, same output");
     assert!(!same(&a[0..1], &a[1..2]), "variants are identical");
