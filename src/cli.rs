@@ -231,6 +231,56 @@ pub enum Command {
         #[command(flatten)]
         view: ViewArgs,
     },
+    /// One stage of `run` on a run folder, as one job of a cluster runs it
+    /// (`slurm` writes the jobs): encode, train, sample, mesh, eval. The same
+    /// code as `run`, so the stages together write what `run` writes.
+    ///
+    /// Example: shapeshifter stage train out/tower --level 2
+    Stage {
+        #[command(subcommand)]
+        stage: StageCmd,
+    },
+    /// Write (and submit, unless --dry-run) the pipeline as a SLURM job graph
+    /// per exemplar: encode; training as a job array, one task per level
+    /// (requeue resumes from checkpoints); sampling and meshing as arrays of
+    /// shards; one evaluation. Scripts in OUT/slurm (OUT/<name>/slurm for
+    /// several meshes), with `submit.sh`.
+    ///
+    /// Example: shapeshifter slurm tower.obj cliff.obj -o /shared/runs -n 50 --partition gpu --gpus-per-job 1 --profile paper
+    Slurm {
+        #[arg(required = true)]
+        meshes: Vec<PathBuf>,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Number of variants per exemplar.
+        #[arg(short, default_value_t = 10)]
+        n: usize,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// A shipped profile (cpu, paper) or a TOML file.
+        #[arg(long, default_value = "cpu")]
+        profile: String,
+        /// Override one value: --set cluster.variants_per_job=10 (repeatable).
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        overrides: Vec<String>,
+        #[arg(long)]
+        partition: Option<String>,
+        /// GPUs per training and sampling job (0: CPU jobs).
+        #[arg(long, default_value_t = 0)]
+        gpus_per_job: u32,
+        /// Only write the scripts.
+        #[arg(long)]
+        dry_run: bool,
+    },
+    /// Compare the level data of two folders (runs, variant folders, encoded
+    /// exemplars): every level_K.vdb under A must be in B with bit-identical
+    /// voxels and features. Exit 1 on any difference.
+    ///
+    /// Example: shapeshifter compare out/single out/cluster
+    Compare {
+        a: PathBuf,
+        b: PathBuf,
+    },
     /// Build the degradation ladder of an encoded exemplar: its finest level
     /// smoothed (two strengths), washed out, colour-shuffled, a blob upsampled
     /// from level 0, and untrained networks' output; score every rung with
@@ -251,6 +301,55 @@ pub enum Command {
         profile: Option<String>,
         #[arg(long, default_value = "auto")]
         device: String,
+    },
+}
+
+/// The stages of `run`, one per cluster job.
+#[derive(Subcommand, Debug)]
+pub enum StageCmd {
+    /// Record the configuration in OUT and encode the exemplar into OUT/exemplar.
+    Encode {
+        mesh: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        #[arg(long, default_value = "cpu")]
+        profile: String,
+        #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+        overrides: Vec<String>,
+    },
+    /// Train every level, or one (`--level K`: one task of a job array).
+    Train {
+        dir: PathBuf,
+        #[arg(long)]
+        level: Option<usize>,
+        #[arg(long, default_value = "auto")]
+        device: String,
+    },
+    /// Sample variants FIRST .. FIRST+N-1 into DIR/variants.
+    Sample {
+        dir: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        first: usize,
+        #[arg(short, default_value_t = 10)]
+        n: usize,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        #[arg(long, default_value = "auto")]
+        device: String,
+    },
+    /// Mesh variants FIRST .. FIRST+N-1 (mesh.ply, mesh.png in each folder).
+    Mesh {
+        dir: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        first: usize,
+        #[arg(short, default_value_t = 10)]
+        n: usize,
+    },
+    /// Score variants 0 .. N-1: DIR/eval.json and DIR/contact_sheet.png.
+    Eval {
+        dir: PathBuf,
+        #[arg(short, default_value_t = 10)]
+        n: usize,
     },
 }
 
@@ -368,68 +467,88 @@ enum Source {
     Demo,
 }
 
-/// One exemplar through the whole pipeline into `out`.
+/// One exemplar through the whole pipeline into `out`: the five stages in one
+/// process (a cluster runs the same stages as separate jobs: `stage`).
 fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool) -> Result<()> {
     let t0 = std::time::Instant::now();
     let config = Config::load(&args.setup.profile, &args.setup.overrides)?;
     let device = device(&args.setup.device)?;
-    let (mesh, source_name, sha) = match &source {
-        Source::File(p) => {
-            let m = mesh::load(p)?;
-            (m, p.display().to_string(), dataset::file_sha256(p)?)
-        }
-        Source::Demo => {
-            let m = shapeshifter::exemplar::ruined_tower(&Default::default());
-            let sha = dataset::mesh_sha256(&m);
-            (m, "(embedded demo exemplar)".to_string(), sha)
-        }
-    };
-    pipeline::record_config(out, &config)?;
-    if matches!(source, Source::Demo) {
-        mesh::save(&mesh, &out.join("exemplar.ply"), true)?;
-        let img = render::render_mesh(&mesh, &pipeline::preview_options())?;
-        render::save_png(&img, &out.join("exemplar.png"))?;
-    }
+    let paths = pipeline::RunPaths::new(out);
     let mut times = Vec::new();
     let t = std::time::Instant::now();
-    let exemplar_dir = out.join("exemplar");
-    let levels = pipeline::encode_stage(&mesh, &source_name, &sha, &config, &exemplar_dir)?;
+    let exemplar = match &source {
+        Source::File(p) => pipeline::ExemplarSource::File(p),
+        Source::Demo => pipeline::ExemplarSource::Demo,
+    };
+    pipeline::run_encode(exemplar, &paths, &config)?;
+    let source_name = match &source {
+        Source::File(p) => p.display().to_string(),
+        Source::Demo => "(embedded demo exemplar)".to_string(),
+    };
     times.push(("encode", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
-    let models_dir = out.join("models");
-    pipeline::record_config(&models_dir, &config)?;
-    pipeline::train_stage(&levels, &sha, &config, device, &models_dir, None, !quiet)?;
+    pipeline::run_train(&paths, &config, device, None, !quiet)?;
     times.push(("train", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
-    let variants_dir = out.join("variants");
     let options = SampleOptions::from_config(&config, args.n, args.seed);
-    let dirs = pipeline::sample_stage(
-        &levels, &mesh.name, !mesh.is_closed(), &config, device, &models_dir, &variants_dir, &options, true,
-    )?;
+    let dirs = pipeline::run_sample(&paths, &config, device, &options)?;
     times.push(("sample", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
-    let meshed = pipeline::mesh_stage(&dirs, !mesh.is_closed(), 256)?;
+    let meshed = pipeline::run_mesh(&paths, 0..args.n)?;
     log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
     times.push(("mesh", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
-    let files = dirs.iter().map(|d| evaluate::read_variant(d)).collect::<Result<Vec<_>, _>>()?;
-    let evaluation = evaluate::evaluate(&exemplar_dir, None, &files, 256)?;
-    let eval_path = out.join("eval.json");
-    evaluation.write_json(&eval_path)?;
-    let sheet_path = out.join("contact_sheet.png");
-    let mut sheet = vec![("exemplar".to_string(), levels[levels.len() - 1].clone())];
-    sheet.extend(files.into_iter().map(|f| (f.name, f.finest)));
-    pipeline::write_contact_sheet(&sheet_path, &sheet)?;
+    let evaluation = pipeline::run_eval(&paths, args.n)?;
     times.push(("evaluate", t.elapsed().as_secs_f64()));
     println!("\n{} -> {}", source_name, out.display());
-    println!("  exemplar levels  {}", exemplar_dir.display());
-    println!("  models           {}", models_dir.display());
-    println!("  variants         {} ({} folders, previews level_K.png)", variants_dir.display(), dirs.len());
-    println!("  metrics          {}", eval_path.display());
-    println!("  contact sheet    {}", sheet_path.display());
+    println!("  exemplar levels  {}", paths.exemplar().display());
+    println!("  models           {}", paths.models().display());
+    println!("  variants         {} ({} folders, previews level_K.png)", paths.variants().display(), dirs.len());
+    println!("  metrics          {}", paths.eval_json().display());
+    println!("  contact sheet    {}", paths.contact_sheet().display());
     println!("  time             {}  (total {:.0} s)",
         times.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect::<Vec<_>>().join(", "), t0.elapsed().as_secs_f64());
     print!("{}", evaluation.table());
+    Ok(())
+}
+
+/// One stage of `run` (see [`Command::Stage`]).
+fn run_stage(stage: StageCmd, quiet: bool) -> Result<()> {
+    let recorded = |dir: &std::path::Path| pipeline::RunPaths::new(dir).read_config();
+    match stage {
+        StageCmd::Encode { mesh, output, profile, overrides } => {
+            let config = Config::load(&profile, &overrides)?;
+            let paths = pipeline::RunPaths::new(&output);
+            let (_, levels) = pipeline::run_encode(pipeline::ExemplarSource::File(&mesh), &paths, &config)?;
+            println!("encoded {} levels -> {}", levels.len(), paths.exemplar().display());
+        }
+        StageCmd::Train { dir, level, device: dev } => {
+            let config = recorded(&dir)?;
+            let reports = pipeline::run_train(&pipeline::RunPaths::new(&dir), &config, device(&dev)?, level, !quiet)?;
+            for r in &reports {
+                println!(
+                    "level {}: {} upsampler + {} diffusion steps, {:.0} s{}",
+                    r.level, r.upsampler_steps, r.diffusion_steps, r.seconds,
+                    if r.finished { "" } else { " (not finished: run again to resume)" }
+                );
+            }
+        }
+        StageCmd::Sample { dir, first, n, seed, device: dev } => {
+            let config = recorded(&dir)?;
+            let mut options = SampleOptions::from_config(&config, n, seed);
+            options.first = first;
+            let dirs = pipeline::run_sample(&pipeline::RunPaths::new(&dir), &config, device(&dev)?, &options)?;
+            println!("{} variants ({}..{}) -> {}", dirs.len(), first, first + n, dir.join("variants").display());
+        }
+        StageCmd::Mesh { dir, first, n } => {
+            let done = pipeline::run_mesh(&pipeline::RunPaths::new(&dir), first..first + n)?;
+            println!("{done} variants meshed");
+        }
+        StageCmd::Eval { dir, n } => {
+            let evaluation = pipeline::run_eval(&pipeline::RunPaths::new(&dir), n)?;
+            print!("{}", evaluation.table());
+        }
+    }
     Ok(())
 }
 
@@ -638,6 +757,60 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             };
             render::save_png(&img, &output)?;
             Ok(ExitCode::SUCCESS)
+        }
+        Command::Stage { stage } => {
+            run_stage(stage, quiet)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Slurm { meshes, output, n, seed, profile, overrides, partition, gpus_per_job, dry_run } => {
+            let config = Config::load(&profile, &overrides)?;
+            let opts = shapeshifter::cluster::GraphOptions {
+                binary: std::env::current_exe()?,
+                profile,
+                overrides,
+                n,
+                seed,
+                partition,
+                gpus_per_job,
+            };
+            let several = meshes.len() > 1;
+            for m in &meshes {
+                if !m.is_file() {
+                    anyhow::bail!("{}: no such mesh file", m.display());
+                }
+                let out = if several {
+                    output.join(m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default())
+                } else {
+                    output.clone()
+                };
+                let jobs = shapeshifter::cluster::job_graph(m, &out, &config, &opts)?;
+                let submit = shapeshifter::cluster::write_graph(&out.join("slurm"), &jobs)?;
+                if dry_run {
+                    println!("{}: {} jobs written, submit with {}", m.display(), jobs.len(), submit.display());
+                    continue;
+                }
+                let o = std::process::Command::new("bash")
+                    .arg(&submit)
+                    .output()
+                    .map_err(|e| anyhow::anyhow!("{}: cannot run: {e}", submit.display()))?;
+                if !o.status.success() {
+                    anyhow::bail!(
+                        "{}: submission failed: {}",
+                        submit.display(),
+                        String::from_utf8_lossy(&o.stderr).trim().replace('\n', " | ")
+                    );
+                }
+                print!("{}", String::from_utf8_lossy(&o.stdout));
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Compare { a, b } => {
+            let report = shapeshifter::dataset::compare_levels(&a, &b)?;
+            println!("{} level files compared: {} identical", report.compared, report.compared - report.differences.len());
+            for d in &report.differences {
+                println!("  differs: {d}");
+            }
+            Ok(if report.differences.is_empty() && report.compared > 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
         }
         Command::Ladder { dir, output, profile, device: dev } => {
             let config = match profile.as_deref() {

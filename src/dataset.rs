@@ -167,3 +167,59 @@ pub fn read_manifest(dir: &Path) -> Result<Manifest> {
         .map_err(|_| Error::file(dir, "has no manifest.json (expected the output of `shapeshifter encode`)"))?;
     serde_json::from_str(&text).map_err(|e| Error::file(&path, format!("invalid manifest: {e}")))
 }
+
+/// What [`compare_levels`] found.
+#[derive(Clone, Debug, Default)]
+pub struct LevelComparison {
+    /// Level files found under the first folder.
+    pub compared: usize,
+    /// One line per file that is missing from the second folder or differs.
+    pub differences: Vec<String>,
+}
+
+/// Every `level_K.vdb` under `a` (recursively) against the file at the same
+/// relative path under `b`: the same voxels, offsets, normals, colours and
+/// mask, bit for bit (the files themselves differ: OpenVDB writes a fresh
+/// UUID into each).
+pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
+    fn walk(dir: &Path, out: &mut Vec<std::path::PathBuf>) -> Result<()> {
+        let mut entries: Vec<_> = std::fs::read_dir(dir)
+            .map_err(|e| Error::file(dir, e.to_string()))?
+            .filter_map(|e| e.ok())
+            .map(|e| e.path())
+            .collect();
+        entries.sort();
+        for p in entries {
+            if p.is_dir() {
+                walk(&p, out)?;
+            } else if p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with("level_") && n.ends_with(".vdb")) {
+                out.push(p);
+            }
+        }
+        Ok(())
+    }
+    let mut files = Vec::new();
+    walk(a, &mut files)?;
+    let mut report = LevelComparison { compared: files.len(), ..Default::default() };
+    for fa in files {
+        let rel = fa.strip_prefix(a).unwrap_or(&fa).to_path_buf();
+        let fb = b.join(&rel);
+        if !fb.is_file() {
+            report.differences.push(format!("{}: missing from {}", rel.display(), b.display()));
+            continue;
+        }
+        let (la, _) = crate::vdb::read_level(&fa)?;
+        let (lb, _) = crate::vdb::read_level(&fb)?;
+        let bits = |v: &[glam::Vec3]| v.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<u32>>();
+        let same = la.resolution == lb.resolution
+            && la.coords == lb.coords
+            && bits(&la.offsets) == bits(&lb.offsets)
+            && bits(&la.normals) == bits(&lb.normals)
+            && bits(&la.colours) == bits(&lb.colours)
+            && la.mask.iter().map(|m| m.to_bits()).eq(lb.mask.iter().map(|m| m.to_bits()));
+        if !same {
+            report.differences.push(format!("{}: {} vs {} voxels, features differ", rel.display(), la.len(), lb.len()));
+        }
+    }
+    Ok(report)
+}

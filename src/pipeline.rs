@@ -392,3 +392,110 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
     write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))?;
     Ok(outcome)
 }
+
+/// The folders and files of a run (see the module documentation), shared by
+/// `run` (every stage in one process) and the `stage` commands (one stage per
+/// process, as a cluster job runs it).
+#[derive(Clone, Debug)]
+pub struct RunPaths {
+    pub root: PathBuf,
+}
+
+impl RunPaths {
+    pub fn new(root: &Path) -> Self {
+        RunPaths { root: root.to_path_buf() }
+    }
+    pub fn config(&self) -> PathBuf {
+        self.root.join("config.toml")
+    }
+    pub fn exemplar(&self) -> PathBuf {
+        self.root.join("exemplar")
+    }
+    pub fn models(&self) -> PathBuf {
+        self.root.join("models")
+    }
+    pub fn variants(&self) -> PathBuf {
+        self.root.join("variants")
+    }
+    pub fn eval_json(&self) -> PathBuf {
+        self.root.join("eval.json")
+    }
+    pub fn contact_sheet(&self) -> PathBuf {
+        self.root.join("contact_sheet.png")
+    }
+
+    /// The configuration `stage encode` (or `run`) recorded in the run folder.
+    pub fn read_config(&self) -> Result<Config> {
+        let p = self.config();
+        if !p.is_file() {
+            return Err(Error::file(&self.root, "has no config.toml: run `stage encode` (or `run`) into it first"));
+        }
+        Config::read(&p)
+    }
+}
+
+/// Where an exemplar comes from.
+pub enum ExemplarSource<'a> {
+    File(&'a Path),
+    /// The embedded demo tower.
+    Demo,
+}
+
+/// Stage 1: records the configuration in the run folder and encodes the
+/// exemplar into `OUT/exemplar` (the demo exemplar is also written as
+/// `exemplar.ply` and `exemplar.png`).
+pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> Result<(Mesh, Vec<Level>)> {
+    let (mesh, name, sha) = match source {
+        ExemplarSource::File(p) => (crate::mesh::load(p)?, p.display().to_string(), dataset::file_sha256(p)?),
+        ExemplarSource::Demo => {
+            let m = crate::exemplar::ruined_tower(&Default::default());
+            let sha = dataset::mesh_sha256(&m);
+            (m, "(embedded demo exemplar)".to_string(), sha)
+        }
+    };
+    record_config(&paths.root, config)?;
+    if name.starts_with("(embedded") {
+        crate::mesh::save(&mesh, &paths.root.join("exemplar.ply"), true)?;
+        render::save_png(&render::render_mesh(&mesh, &preview_options())?, &paths.root.join("exemplar.png"))?;
+    }
+    let levels = encode_stage(&mesh, &name, &sha, config, &paths.exemplar())?;
+    Ok((mesh, levels))
+}
+
+/// Stage 2: trains every level (or `only` one, as one task of a job array)
+/// into `OUT/models`, resuming what a killed job left.
+pub fn run_train(paths: &RunPaths, config: &Config, device: tch::Device, only: Option<usize>, progress: bool) -> Result<Vec<train::TrainReport>> {
+    let (manifest, levels) = dataset::read(&paths.exemplar())?;
+    record_config(&paths.models(), config)?;
+    train_stage(&levels, &manifest.source_sha256, config, device, &paths.models(), only, progress)
+}
+
+/// Stage 3: samples variants `options.first ..` into `OUT/variants`.
+pub fn run_sample(paths: &RunPaths, config: &Config, device: tch::Device, options: &SampleOptions) -> Result<Vec<PathBuf>> {
+    let (manifest, levels) = dataset::read(&paths.exemplar())?;
+    sample_stage(&levels, &manifest.exemplar, manifest.open_surface, config, device, &paths.models(), &paths.variants(), options, true)
+}
+
+/// Stage 4: meshes the variants with indices in `range` that exist.
+pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>) -> Result<usize> {
+    let manifest = dataset::read_manifest(&paths.exemplar())?;
+    let dirs: Vec<PathBuf> = range.map(|i| variant_dir(&paths.variants(), i)).filter(|d| d.is_dir()).collect();
+    mesh_stage(&dirs, manifest.open_surface, 256)
+}
+
+/// Stage 5: scores variants `0..n` against the exemplar into
+/// `OUT/eval.json`, and draws `OUT/contact_sheet.png`.
+pub fn run_eval(paths: &RunPaths, n: usize) -> Result<crate::evaluate::Evaluation> {
+    let (_, levels) = dataset::read(&paths.exemplar())?;
+    let dirs: Vec<PathBuf> = (0..n).map(|i| variant_dir(&paths.variants(), i)).collect();
+    if let Some(missing) = dirs.iter().find(|d| !d.is_dir()) {
+        return Err(Error::file(missing, "is missing: sample it first (did a sampling job fail?)"));
+    }
+    let files = dirs.iter().map(|d| crate::evaluate::read_variant(d)).collect::<Result<Vec<_>>>()?;
+    let evaluation = crate::evaluate::evaluate(&paths.exemplar(), None, &files, 256)?;
+    evaluation.write_json(&paths.eval_json())?;
+    let mut sheet = vec![("exemplar".to_string(), levels[levels.len() - 1].clone())];
+    sheet.extend(files.into_iter().map(|f| (f.name, f.finest)));
+    write_contact_sheet(&paths.contact_sheet(), &sheet)?;
+    Ok(evaluation)
+}
