@@ -6,7 +6,7 @@
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup build demo test bench clean
+.PHONY: setup build demo test bench clean cluster-test
 
 setup:
 	@bash scripts/setup.sh
@@ -19,6 +19,13 @@ demo: build
 
 test: setup
 	cargo test --release $(CARGO_FEATURES) -- --test-threads=2
+
+# The pipeline as a SLURM job graph on a real one-node cluster on this machine
+# (installs slurm-wlm and munge; daemons in a private network namespace),
+# compared with a single-process run. CI runs it after `make test`.
+cluster-test: build
+	cargo build --release $(CARGO_FEATURES) --example demo_exemplar
+	bash scripts/cluster-test.sh
 
 # Every benchmark of the README's performance table (the ruined tower from
 # ../shared/data where it is present; synthetic shapes stand in otherwise).
