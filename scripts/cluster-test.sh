@@ -193,7 +193,7 @@ scontrol requeue "${train_id}_0"
 # a test need not wait for that.
 sleep 1
 scontrol update JobId="${train_id}_0" StartTime=now 2>/dev/null || true
-echo "  requeue: level-0 task killed at a checkpoint of step $before and requeued"
+echo "  requeue: level-0 task killed and requeued once its checkpoints had reached step $before"
 wait_idle 900
 log=$(ls "$WORK"/requeue/slurm/logs/ss-train-*_0.out)
 grep -m1 "resuming at upsampler step" "$log" | sed 's/^/  requeue: /' \
