@@ -220,3 +220,54 @@ vdb.write(sys.argv[2], grids=grids)
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(mesh::load(&out).unwrap().triangles.len() > 100);
 }
+
+#[test]
+fn slurm_dry_run_writes_the_job_graph_and_stages_fill_one_run_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = small_tower_ply(dir.path());
+    let out = dir.path().join("cluster");
+    let o = shapeshifter(&["slurm", ply.to_str().unwrap(), "-o", out.to_str().unwrap(), "-n", "7", "--dry-run"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let slurm = out.join("slurm");
+    assert_eq!(listing(&slurm), ["encode.sbatch", "eval.sbatch", "logs", "mesh.sbatch", "sample.sbatch", "submit.sh", "train.sbatch"]);
+    let train = std::fs::read_to_string(slurm.join("train.sbatch")).unwrap();
+    assert!(train.contains("#SBATCH --array=0-3") && train.contains("#SBATCH --requeue"), "{train}");
+    let sample = std::fs::read_to_string(slurm.join("sample.sbatch")).unwrap();
+    assert!(sample.contains("#SBATCH --array=0-1") && sample.contains("stage sample"), "7 variants in shards of 5: {sample}");
+    assert!(!out.join("exemplar").exists(), "a dry run runs nothing");
+    // A mesh that does not exist: one line, nothing written.
+    let o = shapeshifter(&["slurm", "nope.obj", "-o", dir.path().join("c2").to_str().unwrap(), "--dry-run"]);
+    assert_clean_failure(&o, "nope.obj", "no such mesh");
+    assert!(!dir.path().join("c2").exists());
+
+    // The stages by hand, sampling in two shards, give what one `run` gives.
+    let tiny = [
+        "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
+        "--set", "train.level0_iterations=3", "--set", "train.upper_iterations=2", "--set", "train.upsampler_iterations=2",
+    ];
+    let staged = dir.path().join("staged");
+    let s = staged.to_str().unwrap();
+    let mut enc = vec!["stage", "encode", ply.to_str().unwrap(), "-o", s];
+    enc.extend(tiny);
+    for args in [
+        enc,
+        vec!["stage", "train", s, "--level", "1"],
+        vec!["stage", "train", s, "--level", "0"],
+        vec!["stage", "sample", s, "--first", "1", "-n", "2"],
+        vec!["stage", "sample", s, "--first", "0", "-n", "1"],
+    ] {
+        let o = shapeshifter(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    }
+    let single = dir.path().join("single");
+    let mut run = vec!["run", ply.to_str().unwrap(), "-o", single.to_str().unwrap(), "-n", "3"];
+    run.extend(tiny);
+    let o = shapeshifter(&run);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = shapeshifter(&["compare", single.join("variants").to_str().unwrap(), staged.join("variants").to_str().unwrap()]);
+    assert!(o.status.success(), "shards differ from one run: {}", stdout(&o));
+    assert!(stdout(&o).contains("identical"), "{}", stdout(&o));
+    // Evaluation before every variant exists names the missing one.
+    let o = shapeshifter(&["stage", "eval", s, "-n", "4"]);
+    assert_clean_failure(&o, "variant_003", "is missing");
+}
