@@ -393,6 +393,10 @@ pub struct RunArgs {
     /// Number of variants.
     #[arg(short, default_value_t = 10)]
     pub n: usize,
+    /// Levels trained at once, each in its own process (levels are
+    /// independent). 0: the CPU cores divided by --threads (1 on a GPU).
+    #[arg(long, default_value_t = 0)]
+    pub jobs: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[command(flatten)]
@@ -469,7 +473,7 @@ enum Source {
 
 /// One exemplar through the whole pipeline into `out`: the five stages in one
 /// process (a cluster runs the same stages as separate jobs: `stage`).
-fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool) -> Result<()> {
+fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32) -> Result<()> {
     let t0 = std::time::Instant::now();
     let config = Config::load(&args.setup.profile, &args.setup.overrides)?;
     let device = device(&args.setup.device)?;
@@ -487,7 +491,17 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool) -
     };
     times.push(("encode", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
-    pipeline::run_train(&paths, &config, device, None, !quiet)?;
+    let jobs = match args.jobs {
+        0 if device.is_cuda() => 1,
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()) / threads.max(1) as usize,
+        j => j,
+    };
+    if jobs > 1 {
+        let exe = std::env::current_exe()?;
+        pipeline::train_concurrently(&paths, &config, &exe, threads.max(1), &args.setup.device, jobs, !quiet)?;
+    } else {
+        pipeline::run_train(&paths, &config, device, None, !quiet)?;
+    }
     times.push(("train", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
     let options = SampleOptions::from_config(&config, args.n, args.seed);
@@ -692,7 +706,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 } else {
                     output.clone()
                 };
-                if let Err(e) = run_one(Source::File(m.clone()), &out, &run, quiet) {
+                if let Err(e) = run_one(Source::File(m.clone()), &out, &run, quiet, cli.threads) {
                     let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
                     eprintln!("error: {}", msg.join(": "));
                     failed += 1;
@@ -705,7 +719,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Demo { output, run } => {
-            run_one(Source::Demo, &output, &run, quiet)?;
+            run_one(Source::Demo, &output, &run, quiet, cli.threads)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Mesh { input, output, method, resolution, preview } => {

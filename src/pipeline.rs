@@ -101,6 +101,112 @@ pub fn encode_stage(mesh: &Mesh, source: &str, source_sha: &str, config: &Config
     Ok(levels)
 }
 
+/// What level `k`'s trained models depend on.
+fn train_digest(source_sha: &str, config: &Config, k: usize) -> String {
+    digest(&[source_sha, &config.stage_digest("train"), &k.to_string()])
+}
+
+/// Trains the levels not yet trained as concurrent child processes, each
+/// running `exe --threads T stage train OUT --level K` exactly as a cluster
+/// task does (so the weights are those of a sequential run: every step
+/// reseeds its own process's generators), at most `jobs` at a time, the
+/// finest (costliest) levels first. Each child's log goes to
+/// `OUT/models/level_K_train.log`; `progress` draws one bar per level from
+/// those logs. Returns the levels trained.
+pub fn train_concurrently(
+    paths: &RunPaths,
+    config: &Config,
+    exe: &Path,
+    threads: i32,
+    device: &str,
+    jobs: usize,
+    progress: bool,
+) -> Result<Vec<usize>> {
+    let (manifest, levels) = dataset::read(&paths.exemplar())?;
+    let models = paths.models();
+    record_config(&models, config)?;
+    let mut queue: Vec<usize> = (0..levels.len())
+        .filter(|&k| !is_done(&models, &format!("train_level_{k}"), &train_digest(&manifest.source_sha256, config, k)))
+        .collect();
+    let todo = queue.clone();
+    queue.sort_by_key(|&k| std::cmp::Reverse(k)); // finest first
+    queue.reverse(); // popped from the end
+    let tc = &config.train;
+    let total = |k: usize| if k == 0 { tc.level0_iterations } else { tc.upsampler_iterations + tc.upper_iterations };
+    let bars = indicatif::MultiProgress::with_draw_target(if progress {
+        indicatif::ProgressDrawTarget::stderr()
+    } else {
+        indicatif::ProgressDrawTarget::hidden()
+    });
+    let style = indicatif::ProgressStyle::with_template("level {prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} {msg}")
+        .expect("valid template");
+    let mut running: Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)> = Vec::new();
+    let mut failed: Vec<String> = Vec::new();
+    let t0 = Instant::now();
+    while !queue.is_empty() || !running.is_empty() {
+        while running.len() < jobs.max(1) && failed.is_empty() {
+            let Some(k) = queue.pop() else { break };
+            let log_path = models.join(format!("level_{k}_train.log"));
+            let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
+            let child = std::process::Command::new(exe)
+                .args(["--threads", &threads.to_string(), "stage", "train"])
+                .arg(&paths.root)
+                .args(["--level", &k.to_string(), "--device", device])
+                .stdout(std::process::Stdio::null())
+                .stderr(log)
+                .spawn()
+                .map_err(|e| Error::file(exe, format!("cannot start a training process: {e}")))?;
+            let bar = bars.add(indicatif::ProgressBar::new(total(k) as u64));
+            bar.set_style(style.clone());
+            bar.set_prefix(k.to_string());
+            running.push((k, child, bar, log_path));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        let mut i = 0;
+        while i < running.len() {
+            let (k, child, bar, log_path) = &mut running[i];
+            bar.set_position(steps_logged(log_path) as u64);
+            match child.try_wait().map_err(|e| Error::Invalid(format!("level {k} training: {e}")))? {
+                None => i += 1,
+                Some(status) => {
+                    if status.success() {
+                        bar.finish_with_message("done");
+                    } else {
+                        let text = std::fs::read_to_string(&*log_path).unwrap_or_default();
+                        let last = text.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no output").to_string();
+                        failed.push(format!("level {k} training failed ({status}): {last} (log: {})", log_path.display()));
+                        bar.abandon_with_message("failed");
+                    }
+                    running.swap_remove(i);
+                }
+            }
+        }
+    }
+    if !failed.is_empty() {
+        return Err(Error::Invalid(failed.join("; ")));
+    }
+    log::info!("train: {} levels on {} processes in {:.0} s", todo.len(), jobs.max(1), t0.elapsed().as_secs_f64());
+    Ok(todo)
+}
+
+/// Steps a training log reports (upsampler steps, then diffusion steps,
+/// from the "<phase> step X/Y" lines written every tenth of a phase).
+fn steps_logged(log: &Path) -> usize {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    let mut upsampler = 0;
+    let mut diffusion = 0;
+    for line in text.lines() {
+        let Some((head, rest)) = line.split_once(" step ") else { continue };
+        let Some(done) = rest.split('/').next().and_then(|v| v.trim().parse::<usize>().ok()) else { continue };
+        if head.ends_with("upsampler") {
+            upsampler = done;
+        } else if head.ends_with("diffusion") {
+            diffusion = done;
+        }
+    }
+    upsampler + diffusion
+}
+
 /// Trains the given levels (all when `only` is None) into `models_dir`,
 /// resuming any level that was interrupted.
 pub fn train_stage(
@@ -122,7 +228,7 @@ pub fn train_stage(
     };
     let mut reports = Vec::new();
     for k in which {
-        let d = digest(&[source_sha, &config.stage_digest("train"), &k.to_string()]);
+        let d = train_digest(source_sha, config, k);
         let stage = format!("train_level_{k}");
         if is_done(models_dir, &stage, &d) {
             log::info!("train level {k}: reusing {}", models_dir.display());
