@@ -121,6 +121,10 @@ pub enum Command {
         /// when a level's state file is there).
         #[arg(long)]
         resume: bool,
+        /// Levels trained at once, each in its own process (without --level).
+        /// 0: the CPU cores divided by --threads (1 on a GPU).
+        #[arg(long, default_value_t = 0)]
+        jobs: usize,
         #[command(flatten)]
         setup: SetupArgs,
     },
@@ -471,6 +475,16 @@ enum Source {
     Demo,
 }
 
+/// Levels trained at once: `jobs`, or with 0 the cores divided by the libtorch
+/// threads per level (1 on a GPU: one device, shared).
+fn auto_jobs(jobs: usize, device: tch::Device, threads: i32) -> usize {
+    match jobs {
+        0 if device.is_cuda() => 1,
+        0 => (std::thread::available_parallelism().map_or(1, |n| n.get()) / threads.max(1) as usize).max(1),
+        j => j,
+    }
+}
+
 /// One exemplar through the whole pipeline into `out`: the five stages in one
 /// process (a cluster runs the same stages as separate jobs: `stage`).
 fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32) -> Result<()> {
@@ -491,11 +505,7 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
     };
     times.push(("encode", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
-    let jobs = match args.jobs {
-        0 if device.is_cuda() => 1,
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()) / threads.max(1) as usize,
-        j => j,
-    };
+    let jobs = auto_jobs(args.jobs, device, threads);
     if jobs > 1 {
         let exe = std::env::current_exe()?;
         pipeline::train_concurrently(&paths, &config, &exe, threads.max(1), &args.setup.device, jobs, !quiet)?;
@@ -650,7 +660,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Train { dir, models, level, resume, setup } => {
+        Command::Train { dir, models, level, resume, jobs, setup } => {
             let config = Config::load(&setup.profile, &setup.overrides)?;
             let device = device(&setup.device)?;
             let (manifest, levels) = dataset::read(&dir)?;
@@ -658,6 +668,25 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             pipeline::record_config(&models, &config)?;
             if resume && !models.is_dir() {
                 anyhow::bail!("{}: --resume, but there is no models folder", models.display());
+            }
+            let jobs = auto_jobs(jobs, device, cli.threads);
+            if level.is_none() && jobs > 1 {
+                let todo = pipeline::levels_to_train(levels.len(), &manifest.source_sha256, &config, &models);
+                let exe = std::env::current_exe()?;
+                pipeline::train_in_processes(&models, &todo, &config, jobs, !quiet, |k| {
+                    let mut c = std::process::Command::new(&exe);
+                    c.args(["--threads", &cli.threads.max(1).to_string(), "train"])
+                        .arg(&dir)
+                        .arg("--models")
+                        .arg(&models)
+                        .args(["--level", &k.to_string(), "--profile", &setup.profile, "--device", &setup.device]);
+                    for o in &setup.overrides {
+                        c.args(["--set", o]);
+                    }
+                    c
+                })?;
+                println!("{} levels trained on {jobs} processes -> {}", todo.len(), models.display());
+                return Ok(ExitCode::SUCCESS);
             }
             let reports = pipeline::train_stage(&levels, &manifest.source_sha256, &config, device, &models, level, !quiet)?;
             for r in &reports {

@@ -106,13 +106,19 @@ fn train_digest(source_sha: &str, config: &Config, k: usize) -> String {
     digest(&[source_sha, &config.stage_digest("train"), &k.to_string()])
 }
 
-/// Trains the levels not yet trained as concurrent child processes, each
-/// running `exe --threads T stage train OUT --level K` exactly as a cluster
-/// task does (so the weights are those of a sequential run: every step
-/// reseeds its own process's generators), at most `jobs` at a time, the
-/// finest (costliest) levels first. Each child's log goes to
-/// `OUT/models/level_K_train.log`; `progress` draws one bar per level from
-/// those logs. Returns the levels trained.
+/// The levels whose training is not finished (no stamp for this exemplar and
+/// configuration) in `models`.
+pub fn levels_to_train(level_count: usize, source_sha: &str, config: &Config, models: &Path) -> Vec<usize> {
+    (0..level_count)
+        .filter(|&k| !is_done(models, &format!("train_level_{k}"), &train_digest(source_sha, config, k)))
+        .collect()
+}
+
+/// Trains the levels not yet trained of a run folder as concurrent child
+/// processes, each running `exe --threads T stage train OUT --level K` exactly
+/// as a cluster task does (so the weights are those of a sequential run:
+/// every step reseeds its own process's generators). See
+/// [`train_in_processes`]. Returns the levels trained.
 pub fn train_concurrently(
     paths: &RunPaths,
     config: &Config,
@@ -125,12 +131,32 @@ pub fn train_concurrently(
     let (manifest, levels) = dataset::read(&paths.exemplar())?;
     let models = paths.models();
     record_config(&models, config)?;
-    let mut queue: Vec<usize> = (0..levels.len())
-        .filter(|&k| !is_done(&models, &format!("train_level_{k}"), &train_digest(&manifest.source_sha256, config, k)))
-        .collect();
-    let todo = queue.clone();
-    queue.sort_by_key(|&k| std::cmp::Reverse(k)); // finest first
-    queue.reverse(); // popped from the end
+    let todo = levels_to_train(levels.len(), &manifest.source_sha256, config, &models);
+    train_in_processes(&models, &todo, config, jobs, progress, |k| {
+        let mut c = std::process::Command::new(exe);
+        c.args(["--threads", &threads.to_string(), "stage", "train"])
+            .arg(&paths.root)
+            .args(["--level", &k.to_string(), "--device", device]);
+        c
+    })?;
+    Ok(todo)
+}
+
+/// Runs `child(k)` for every level in `todo`, at most `jobs` at a time, the
+/// finest (costliest) levels first; each child's stderr goes to
+/// `models/level_K_train.log`, and `progress` draws one bar per level from
+/// those logs. Fails, after the running children end, naming every level
+/// whose process failed and the last line of its log.
+pub fn train_in_processes(
+    models: &Path,
+    todo: &[usize],
+    config: &Config,
+    jobs: usize,
+    progress: bool,
+    child: impl Fn(usize) -> std::process::Command,
+) -> Result<()> {
+    let mut queue: Vec<usize> = todo.to_vec();
+    queue.sort_unstable(); // popped from the end: finest first
     let tc = &config.train;
     let total = |k: usize| if k == 0 { tc.level0_iterations } else { tc.upsampler_iterations + tc.upper_iterations };
     let bars = indicatif::MultiProgress::with_draw_target(if progress {
@@ -148,25 +174,25 @@ pub fn train_concurrently(
             let Some(k) = queue.pop() else { break };
             let log_path = models.join(format!("level_{k}_train.log"));
             let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
-            let child = std::process::Command::new(exe)
-                .args(["--threads", &threads.to_string(), "stage", "train"])
-                .arg(&paths.root)
-                .args(["--level", &k.to_string(), "--device", device])
+            let process = child(k)
                 .stdout(std::process::Stdio::null())
                 .stderr(log)
                 .spawn()
-                .map_err(|e| Error::file(exe, format!("cannot start a training process: {e}")))?;
+                .map_err(|e| Error::Invalid(format!("cannot start the training process of level {k}: {e}")))?;
             let bar = bars.add(indicatif::ProgressBar::new(total(k) as u64));
             bar.set_style(style.clone());
             bar.set_prefix(k.to_string());
-            running.push((k, child, bar, log_path));
+            running.push((k, process, bar, log_path));
+        }
+        if !failed.is_empty() {
+            queue.clear(); // start nothing more after a failure
         }
         std::thread::sleep(std::time::Duration::from_millis(500));
         let mut i = 0;
         while i < running.len() {
-            let (k, child, bar, log_path) = &mut running[i];
+            let (k, process, bar, log_path) = &mut running[i];
             bar.set_position(steps_logged(log_path) as u64);
-            match child.try_wait().map_err(|e| Error::Invalid(format!("level {k} training: {e}")))? {
+            match process.try_wait().map_err(|e| Error::Invalid(format!("level {k} training: {e}")))? {
                 None => i += 1,
                 Some(status) => {
                     if status.success() {
@@ -186,7 +212,7 @@ pub fn train_concurrently(
         return Err(Error::Invalid(failed.join("; ")));
     }
     log::info!("train: {} levels on {} processes in {:.0} s", todo.len(), jobs.max(1), t0.elapsed().as_secs_f64());
-    Ok(todo)
+    Ok(())
 }
 
 /// Steps a training log reports (upsampler steps, then diffusion steps,
