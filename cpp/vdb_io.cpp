@@ -10,8 +10,63 @@
 #include "shapeshifter/cpp/vdb_common.h"
 
 #include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 
+#include <cstdlib>
+#include <fstream>
+#include <new>
+#include <sstream>
 #include <stdexcept>
+
+// Reading a damaged level file under a budget.
+//
+// Why: OpenVDB trusts the sizes a file declares. Its readers loop over a
+// declared count without checking the stream (RootNode::readTopology creates
+// `numChildren` internal nodes of 32^3 entries each, ~260 KB apiece, and keeps
+// going after the file has ended), and size strings and metadata from a
+// declared 32-bit length before reading them (readString, StringMetadata,
+// UnknownMetadata fill that many bytes). One damaged count in a 182 KB file
+// cost 14-17 GB and half a minute before it failed.
+//
+// How: 1. the whole file is read into memory (its length is known) and parsed
+// from a stream that throws at its end, so every loop stops where the bytes
+// stop: what OpenVDB allocates is then proportional to the bytes it consumed;
+// 2. while it parses, no single allocation on this thread may exceed the cap
+// below (a replaceable operator new that checks a thread-local limit), so a
+// declared length cannot allocate more than the file could hold.
+namespace shapeshifter {
+namespace {
+thread_local std::size_t g_allocation_cap = 0; // 0: no cap (every other caller)
+
+// The cap for a file of `len` bytes: a legitimate read allocates blocks no
+// larger than the file itself (compressed chunks) or a few MB (node tables).
+struct AllocationCap {
+  explicit AllocationCap(std::size_t len) { g_allocation_cap = 32u * 1024 * 1024 + 2 * len; }
+  ~AllocationCap() { g_allocation_cap = 0; }
+  AllocationCap(const AllocationCap &) = delete;
+  AllocationCap &operator=(const AllocationCap &) = delete;
+};
+} // namespace
+} // namespace shapeshifter
+
+// The replaceable global allocation functions (the C++ standard lets a program
+// define them once); identical to the library's except for the cap check.
+void *operator new(std::size_t n) {
+  const std::size_t cap = shapeshifter::g_allocation_cap;
+  if (cap != 0 && n > cap) throw std::bad_alloc();
+  if (n == 0) n = 1;
+  for (;;) {
+    if (void *p = std::malloc(n)) return p;
+    std::new_handler handler = std::get_new_handler();
+    if (!handler) throw std::bad_alloc();
+    handler();
+  }
+}
+void *operator new[](std::size_t n) { return ::operator new(n); }
+void operator delete(void *p) noexcept { std::free(p); }
+void operator delete[](void *p) noexcept { std::free(p); }
+void operator delete(void *p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void *p, std::size_t) noexcept { std::free(p); }
 
 namespace shapeshifter {
 namespace {
@@ -129,21 +184,49 @@ void write_level_file(rust::Str path, const LevelData &level, bool half_floats) 
   file.close();
 }
 
-LevelData read_level_file(rust::Str path) {
+namespace {
+// Every grid of a .vdb file, read as the comment at the top of this file says.
+// Errors name the problem in the file's terms, not the stream's.
+openvdb::GridPtrVecPtr read_all_grids(rust::Str path) {
   ensure_openvdb();
-  openvdb::io::File file{std::string(path)};
-  file.open(false); // no delayed loading: a truncated file must fail here
+  std::string bytes;
+  {
+    std::ifstream in(std::string(path), std::ios::binary | std::ios::ate);
+    if (!in) throw std::runtime_error("cannot be opened");
+    const std::streamoff len = in.tellg();
+    if (len < 0) throw std::runtime_error("cannot be read");
+    bytes.resize(static_cast<std::size_t>(len));
+    in.seekg(0);
+    if (!in.read(&bytes[0], len)) throw std::runtime_error("cannot be read");
+  }
+  try {
+    AllocationCap cap(bytes.size());
+    std::istringstream is(bytes); // C++17: a copy (two file sizes in all)
+    is.exceptions(std::ios::failbit | std::ios::badbit);
+    openvdb::io::Stream stream(is, /*delayLoad=*/false);
+    return stream.getGrids();
+  } catch (const std::ios_base::failure &) {
+    throw std::runtime_error("ends before the data it declares (truncated or damaged .vdb file)");
+  } catch (const std::bad_alloc &) {
+    throw std::runtime_error("declares a size larger than the file can hold (damaged .vdb file)");
+  } catch (const std::length_error &) {
+    throw std::runtime_error("declares a size larger than the file can hold (damaged .vdb file)");
+  }
+}
+} // namespace
+
+LevelData read_level_file(rust::Str path) {
+  auto grids = read_all_grids(path);
   auto fetch = [&](const char *name) {
-    if (!file.hasGrid(name))
-      throw std::runtime_error(std::string("is not a shapeshifter level file (no grid '") + name +
-                               "')");
-    return file.readGrid(name);
+    for (const auto &g : *grids)
+      if (g && g->getName() == name) return g;
+    throw std::runtime_error(std::string("is not a shapeshifter level file (no grid '") + name +
+                             "')");
   };
   auto mask = openvdb::GridBase::grid<FloatGrid>(fetch("mask"));
   auto P = openvdb::GridBase::grid<Vec3fGrid>(fetch("P"));
   auto N = openvdb::GridBase::grid<Vec3fGrid>(fetch("N"));
   auto Cd = openvdb::GridBase::grid<Vec3fGrid>(fetch("Cd"));
-  file.close();
   if (!mask || !P || !N || !Cd)
     throw std::runtime_error("has grids mask/P/N/Cd of the wrong value types");
   const auto &xform = mask->transform();
@@ -183,13 +266,10 @@ LevelData read_level_file(rust::Str path) {
 uint64_t count_points(const openvdb::GridBase &grid, rust::Vec<rust::String> &attributes);
 
 rust::Vec<GridSummary> summarise_vdb_file(rust::Str path) {
-  ensure_openvdb();
-  openvdb::io::File file{std::string(path)};
-  file.open(false);
-  auto grids = file.getGrids();
-  file.close();
+  auto grids = read_all_grids(path);
   rust::Vec<GridSummary> out;
   for (const auto &grid : *grids) {
+    if (!grid) continue;
     GridSummary s{};
     s.name = grid->getName();
     s.value_type = grid->valueType();
