@@ -42,7 +42,7 @@ fn mutated_inputs_end_cleanly_within_bounds() {
 /// The verdict itself fails what it must (a test that cannot fail proves nothing).
 #[test]
 fn the_verdict_catches_signals_panics_runaways_and_leftovers() {
-    let ok = hostile::Outcome { code: Some(1), signal: None, timed_out: false, ceiling_hit: false, wall: Duration::from_millis(300), max_rss: 100 << 20, stderr: "error: x.obj: bad\n".into() };
+    let ok = hostile::Outcome { code: Some(1), signal: None, timed_out: false, ceiling_hit: false, wall: Duration::from_millis(300), max_rss: 100 << 20, stderr_bytes: 18, stderr: "error: x.obj: bad\n".into() };
     assert_eq!(hostile::verdict(&ok, &[], 200 << 20), None);
     let abort = hostile::Outcome { code: None, signal: Some(6), ..ok.clone() };
     assert!(hostile::verdict(&abort, &[], 200 << 20).unwrap().contains("signal 6"));
