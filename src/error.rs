@@ -36,6 +36,7 @@ pub fn one_line(message: &str) -> String {
     for word in message.split(|c: char| c.is_whitespace() || c.is_control()).filter(|w| !w.is_empty()) {
         if kept > 0 {
             out.push(' ');
+            kept += 1;
         }
         for c in word.chars() {
             if kept == MAX_MESSAGE {

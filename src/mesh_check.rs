@@ -271,6 +271,11 @@ fn check_stl(path: &Path, head: &[u8], len: u64) -> Result<Declared, String> {
         // Text STL: one face per "endfacet"; its memory grows with its text.
         let all = std::fs::read(path).map_err(|e| e.to_string())?;
         let faces = all.windows(8).filter(|w| w == b"endfacet").count() as u64;
+        // Text STL declares no count: a missing last line is the one sign of a
+        // cut file. OpenMesh reads what is there.
+        if find(&all[all.len().saturating_sub(256)..], b"endsolid").is_none() {
+            log::warn!("{}: text STL has no closing 'endsolid' (cut short?); read {faces} facets", path.display());
+        }
         return Ok(Declared { vertices: None, faces: Some(faces) });
     }
     Err(if head.len() >= 84 {

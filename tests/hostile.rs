@@ -66,7 +66,6 @@ fn regression_inputs_fail_cleanly() {
     let work = tempfile::tempdir().unwrap();
     for f in &files {
         let out = work.path().join("out");
-        std::fs::create_dir_all(&out).unwrap();
         let is_vdb = f.extension().is_some_and(|e| e == "vdb");
         let mut commands = vec![vec!["info".to_string(), f.display().to_string()]];
         if is_vdb {
@@ -75,6 +74,7 @@ fn regression_inputs_fail_cleanly() {
             commands.push(vec!["encode".into(), f.display().to_string(), "-o".into(), out.join("enc").display().to_string()]);
         }
         for argv in commands {
+            std::fs::create_dir_all(&out).unwrap();
             let o = hostile::run_child(&bin(), &argv, &work.path().join("stderr"), Duration::from_secs(20));
             let left: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
             let bound = 256 << 20;
