@@ -10,30 +10,28 @@
 #include "shapeshifter/cpp/vdb_common.h"
 
 #include <openvdb/io/File.h>
-#include <openvdb/io/Stream.h>
 
 #include <cstdlib>
 #include <fstream>
 #include <new>
-#include <sstream>
 #include <stdexcept>
 
 // Reading a damaged level file under a budget.
 //
-// Why: OpenVDB trusts the sizes a file declares. Its readers loop over a
-// declared count without checking the stream (RootNode::readTopology creates
-// `numChildren` internal nodes of 32^3 entries each, ~260 KB apiece, and keeps
-// going after the file has ended), and size strings and metadata from a
-// declared 32-bit length before reading them (readString, StringMetadata,
-// UnknownMetadata fill that many bytes). One damaged count in a 182 KB file
-// cost 14-17 GB and half a minute before it failed.
+// Why: OpenVDB trusts the sizes a file declares. `readString` (grid names and
+// types in the grid descriptors, metadata names) and the string and unknown
+// metadata readers allocate and fill a declared 32-bit length before reading
+// it; a damaged type-name length in a 182 KB file cost 5-6 GB and 6-11 s before
+// failing (and the "unknown grid type" error then copied the name again).
 //
-// How: 1. the whole file is read into memory (its length is known) and parsed
-// from a stream that throws at its end, so every loop stops where the bytes
-// stop: what OpenVDB allocates is then proportional to the bytes it consumed;
-// 2. while it parses, no single allocation on this thread may exceed the cap
-// below (a replaceable operator new that checks a thread-local limit), so a
-// declared length cannot allocate more than the file could hold.
+// How: while OpenVDB parses, no single allocation on this thread may exceed the
+// cap below (a replaceable operator new that checks a thread-local limit, zero
+// everywhere else), so a declared length cannot allocate more than the file
+// could hold; the bad_alloc becomes a one-line error. (Parsing from a memory
+// stream that throws at its end, which would also stop OpenVDB's loops over
+// declared counts at the end of the bytes, was tried and dropped: OpenVDB's
+// readers are not exception-safe mid-node, and 5 of 150 damaged files then
+// ended in "double free or corruption".)
 namespace shapeshifter {
 namespace {
 thread_local std::size_t g_allocation_cap = 0; // 0: no cap (every other caller)
@@ -41,7 +39,7 @@ thread_local std::size_t g_allocation_cap = 0; // 0: no cap (every other caller)
 // The cap for a file of `len` bytes: a legitimate read allocates blocks no
 // larger than the file itself (compressed chunks) or a few MB (node tables).
 struct AllocationCap {
-  explicit AllocationCap(std::size_t len) { g_allocation_cap = 32u * 1024 * 1024 + 2 * len; }
+  explicit AllocationCap(std::size_t len) { g_allocation_cap = 8u * 1024 * 1024 + 2 * len; }
   ~AllocationCap() { g_allocation_cap = 0; }
   AllocationCap(const AllocationCap &) = delete;
   AllocationCap &operator=(const AllocationCap &) = delete;
@@ -185,28 +183,19 @@ void write_level_file(rust::Str path, const LevelData &level, bool half_floats) 
 }
 
 namespace {
-// Every grid of a .vdb file, read as the comment at the top of this file says.
-// Errors name the problem in the file's terms, not the stream's.
-openvdb::GridPtrVecPtr read_all_grids(rust::Str path) {
+// Runs `read` (which opens `path` with openvdb::io::File) under the allocation
+// cap for a file of that size, and names what a failure means in the file's
+// terms.
+template <typename F> auto read_capped(rust::Str path, F read) -> decltype(read()) {
   ensure_openvdb();
-  std::string bytes;
-  {
-    std::ifstream in(std::string(path), std::ios::binary | std::ios::ate);
-    if (!in) throw std::runtime_error("cannot be opened");
-    const std::streamoff len = in.tellg();
-    if (len < 0) throw std::runtime_error("cannot be read");
-    bytes.resize(static_cast<std::size_t>(len));
-    in.seekg(0);
-    if (!in.read(&bytes[0], len)) throw std::runtime_error("cannot be read");
-  }
+  std::ifstream in(std::string(path), std::ios::binary | std::ios::ate);
+  if (!in) throw std::runtime_error("cannot be opened");
+  const std::streamoff len = in.tellg();
+  if (len < 0) throw std::runtime_error("cannot be read");
+  in.close();
   try {
-    AllocationCap cap(bytes.size());
-    std::istringstream is(bytes); // C++17: a copy (two file sizes in all)
-    is.exceptions(std::ios::failbit | std::ios::badbit);
-    openvdb::io::Stream stream(is, /*delayLoad=*/false);
-    return stream.getGrids();
-  } catch (const std::ios_base::failure &) {
-    throw std::runtime_error("ends before the data it declares (truncated or damaged .vdb file)");
+    AllocationCap cap(static_cast<std::size_t>(len));
+    return read();
   } catch (const std::bad_alloc &) {
     throw std::runtime_error("declares a size larger than the file can hold (damaged .vdb file)");
   } catch (const std::length_error &) {
@@ -216,17 +205,26 @@ openvdb::GridPtrVecPtr read_all_grids(rust::Str path) {
 } // namespace
 
 LevelData read_level_file(rust::Str path) {
-  auto grids = read_all_grids(path);
-  auto fetch = [&](const char *name) {
-    for (const auto &g : *grids)
-      if (g && g->getName() == name) return g;
-    throw std::runtime_error(std::string("is not a shapeshifter level file (no grid '") + name +
-                             "')");
-  };
-  auto mask = openvdb::GridBase::grid<FloatGrid>(fetch("mask"));
-  auto P = openvdb::GridBase::grid<Vec3fGrid>(fetch("P"));
-  auto N = openvdb::GridBase::grid<Vec3fGrid>(fetch("N"));
-  auto Cd = openvdb::GridBase::grid<Vec3fGrid>(fetch("Cd"));
+  const std::string file_name(path);
+  // Only the four grids a level needs (not the point grid): less of a damaged
+  // file is parsed.
+  auto grids = read_capped(path, [&] {
+    openvdb::io::File file{file_name};
+    file.open(false); // no delayed loading: a truncated file must fail here
+    std::vector<openvdb::GridBase::Ptr> out;
+    for (const char *name : {"mask", "P", "N", "Cd"}) {
+      if (!file.hasGrid(name))
+        throw std::runtime_error(std::string("is not a shapeshifter level file (no grid '") + name +
+                                 "')");
+      out.push_back(file.readGrid(name));
+    }
+    file.close();
+    return out;
+  });
+  auto mask = openvdb::GridBase::grid<FloatGrid>(grids[0]);
+  auto P = openvdb::GridBase::grid<Vec3fGrid>(grids[1]);
+  auto N = openvdb::GridBase::grid<Vec3fGrid>(grids[2]);
+  auto Cd = openvdb::GridBase::grid<Vec3fGrid>(grids[3]);
   if (!mask || !P || !N || !Cd)
     throw std::runtime_error("has grids mask/P/N/Cd of the wrong value types");
   const auto &xform = mask->transform();
@@ -266,7 +264,14 @@ LevelData read_level_file(rust::Str path) {
 uint64_t count_points(const openvdb::GridBase &grid, rust::Vec<rust::String> &attributes);
 
 rust::Vec<GridSummary> summarise_vdb_file(rust::Str path) {
-  auto grids = read_all_grids(path);
+  const std::string file_name(path);
+  auto grids = read_capped(path, [&] {
+    openvdb::io::File file{file_name};
+    file.open(false);
+    auto all = file.getGrids();
+    file.close();
+    return all;
+  });
   rust::Vec<GridSummary> out;
   for (const auto &grid : *grids) {
     if (!grid) continue;
