@@ -62,7 +62,13 @@ enum Prop {
 
 fn check_ply(all: &[u8]) -> Result<Declared, String> {
     let head = &all[..all.len().min(MAX_HEADER)];
-    let end = find(head, b"end_header").ok_or("PLY header has no end_header in its first 64 KiB")?;
+    // The end_header line itself: a damaged newline before it ("...indicesAend_header")
+    // sent OpenMesh reading binary data as header lines for minutes.
+    let end = head
+        .windows(12)
+        .position(|w| &w[..11] == b"\nend_header" && (w[11] == b'\n' || w[11] == b'\r'))
+        .map(|p| p + 1)
+        .ok_or("PLY header has no 'end_header' line in its first 64 KiB")?;
     // The body starts after the end_header line's newline.
     let body_start = head[end..].iter().position(|&b| b == b'\n').map(|p| end + p + 1).unwrap_or(head.len());
     let text = String::from_utf8_lossy(&head[..end]);

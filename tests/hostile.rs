@@ -78,10 +78,15 @@ fn regression_inputs_fail_cleanly() {
             let o = hostile::run_child(&bin(), &argv, &work.path().join("stderr"), Duration::from_secs(20));
             let left: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
             let bound = 256 << 20;
-            assert_eq!(o.code, Some(1), "{argv:?} must fail: {}", o.stderr);
-            let name = f.file_name().unwrap().to_string_lossy();
-            assert!(o.stderr.lines().any(|l| l.starts_with("error") && l.contains(&*name)), "{argv:?}: {}", o.stderr);
             assert_eq!(hostile::verdict(&o, &left, bound), None, "{argv:?}: {}", o.stderr);
+            // `info` reads every part of a file, so it must reject each one; a
+            // level command may succeed where the damage lies in a grid it
+            // does not read (the point-data grid).
+            if argv[0] == "info" || !is_vdb {
+                assert_eq!(o.code, Some(1), "{argv:?} must fail: {}", o.stderr);
+                let name = f.file_name().unwrap().to_string_lossy();
+                assert!(o.stderr.lines().any(|l| l.starts_with("error") && l.contains(&*name)), "{argv:?}: {}", o.stderr);
+            }
             std::fs::remove_dir_all(&out).unwrap();
         }
     }
