@@ -6,7 +6,7 @@
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup build demo test bench clean cluster-test
+.PHONY: setup build demo test bench fuzz clean cluster-test
 
 setup:
 	@bash scripts/setup.sh
@@ -36,6 +36,12 @@ bench: build
 	if [ -f $(TOWER) ]; then cargo run --release $(CARGO_FEATURES) --example recon_bench -- all mesh=$(TOWER); \
 	else cargo run --release $(CARGO_FEATURES) --example recon_bench; fi
 	cargo run --release $(CARGO_FEATURES) --example metrics_bench
+
+# A long mutation campaign against every reader (README, "Hostile files").
+COUNT ?= 2000
+SEED ?= 1
+fuzz: build
+	cargo run --release $(CARGO_FEATURES) --example hostile_campaign -- count=$(COUNT) seed=$(SEED)
 
 clean:
 	cargo clean

@@ -17,9 +17,37 @@ pub enum Error {
 }
 
 impl Error {
+    /// The message is made one short line: C++ readers quote what they read
+    /// from a damaged file (a grid type name of a million spaces, a newline)
+    /// and the error must stay the one line the command line promises.
     pub fn file(path: &Path, message: impl Into<String>) -> Self {
-        Error::File { path: path.to_path_buf(), message: message.into() }
+        Error::File { path: path.to_path_buf(), message: one_line(&message.into()) }
     }
+}
+
+/// Longest message kept, in characters; longer ones are cut with an ellipsis.
+const MAX_MESSAGE: usize = 300;
+
+/// `message` with control characters as spaces, runs of whitespace collapsed
+/// and at most [`MAX_MESSAGE`] characters.
+pub fn one_line(message: &str) -> String {
+    let mut out = String::new();
+    let mut kept = 0;
+    for word in message.split(|c: char| c.is_whitespace() || c.is_control()).filter(|w| !w.is_empty()) {
+        if kept > 0 {
+            out.push(' ');
+            kept += 1;
+        }
+        for c in word.chars() {
+            if kept == MAX_MESSAGE {
+                out.push('…');
+                return out;
+            }
+            out.push(c);
+            kept += 1;
+        }
+    }
+    out
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -68,4 +96,14 @@ pub fn write_atomically(
 
 fn extension_of(path: &Path) -> String {
     path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn messages_become_one_short_line() {
+        assert_eq!(super::one_line("Grid type \n  x\r\0y  "), "Grid type x y");
+        let long = super::one_line(&"ab ".repeat(1000));
+        assert!(long.chars().count() <= super::MAX_MESSAGE + 1 && long.ends_with('…'), "{long}");
+    }
 }

@@ -130,8 +130,42 @@ pub fn load(path: &Path) -> Result<Mesh> {
             format!("unsupported mesh format '.{ext}' (expected .obj, .ply, .off or .stl)"),
         ));
     }
+    if ext == "obj" {
+        // OBJ is read in Rust (src/obj.rs says why: OpenMesh's reader aborts
+        // the process on some malformed face lines).
+        let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let (data, dropped) = crate::obj::read(&bytes, dir, &path.display().to_string())
+            .map_err(|e| Error::file(path, e.to_string()))?;
+        if dropped.faces > 0 {
+            log::warn!(
+                "{}: dropped {} faces with fewer than 3 corners or a vertex index outside the file's {} vertices",
+                path.display(),
+                dropped.faces,
+                data.positions.len() / 3
+            );
+        }
+        if dropped.uvs > 0 {
+            log::warn!("{}: {} faces have a texture-coordinate index out of range: kept without UVs", path.display(), dropped.uvs);
+        }
+        return from_bridge(path, data);
+    }
+    // PLY, OFF and STL go through OpenMesh, after the sizes their headers
+    // declare were checked against the file's length (src/mesh_check.rs).
+    let declared = crate::mesh_check::check(path, &ext)?;
     let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
     let data = bridge::read_mesh(path_str).map_err(|e| Error::file(path, e.what()))?;
+    if let Some(faces) = declared.faces {
+        if data.faces_in_file < faces {
+            // OpenMesh skips faces it cannot add (an index out of range, a
+            // non-manifold edge) without telling: count them.
+            log::warn!(
+                "{}: dropped {} of the {faces} faces the file declares (invalid vertex indices or non-manifold edges)",
+                path.display(),
+                faces - data.faces_in_file
+            );
+        }
+    }
     from_bridge(path, data)
 }
 

@@ -4,6 +4,7 @@
 mod common;
 
 use common::*;
+use std::path::Path;
 use shapeshifter::{dataset, exemplar, mesh, vdb};
 
 /// Writes the small demo tower as a PLY in `dir`.
@@ -110,25 +111,31 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     std::fs::copy(&good, &good2).unwrap();
     let corrupt = dir.path().join("corrupt.obj");
     std::fs::write(&corrupt, [0xffu8, 0x00, 0x13].repeat(40)).unwrap();
+    // This one used to abort the whole batch (SIGABRT in OpenMesh's OBJ reader).
+    let aborted = dir.path().join("aborted.obj");
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/inputs/hostile/obj_face_without_vertex.obj"), &aborted).unwrap();
     let out = dir.path().join("batch");
     let tiny = [
         "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
         "--set", "train.level0_iterations=3", "--set", "train.upper_iterations=2", "--set", "train.upsampler_iterations=2",
     ];
-    let mut args = vec!["run", good.to_str().unwrap(), corrupt.to_str().unwrap(), good2.to_str().unwrap(), "-o", out.to_str().unwrap(), "-n", "1"];
+    let mut args = vec!["run", good.to_str().unwrap(), corrupt.to_str().unwrap(), aborted.to_str().unwrap(), good2.to_str().unwrap(), "-o", out.to_str().unwrap(), "-n", "1"];
     args.extend(tiny);
     let o = shapeshifter(&args);
     assert!(!o.status.success(), "a failed input must fail the batch");
     let err = stderr(&o);
     let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
-    assert_eq!(errors.len(), 1, "one error line for the corrupt input: {err}");
+    assert_eq!(o.status.code(), Some(1), "exit 1, no signal: {err}");
+    assert_eq!(errors.len(), 2, "one error line per bad input: {err}");
     assert!(errors[0].contains("corrupt.obj"), "{}", errors[0]);
+    assert!(errors[1].contains("aborted.obj") && errors[1].contains("line 7"), "{}", errors[1]);
     for stem in ["tower", "tower2"] {
         assert!(out.join(stem).join("variants/variant_000/level_0.vdb").is_file(), "{stem} has no result: {err}");
         assert!(out.join(stem).join("eval.json").is_file());
         assert!(out.join(stem).join("contact_sheet.png").is_file());
     }
     assert!(!out.join("corrupt").join("eval.json").exists());
+    assert!(!out.join("aborted").join("eval.json").exists());
 }
 
 /// A level of `n` voxels on a small sphere (points on the surface, outward normals).
