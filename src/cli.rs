@@ -480,7 +480,9 @@ enum Source {
 fn auto_jobs(jobs: usize, device: tch::Device, threads: i32) -> usize {
     match jobs {
         0 if device.is_cuda() => 1,
-        0 => (std::thread::available_parallelism().map_or(1, |n| n.get()) / threads.max(1) as usize).max(1),
+        // libtorch's own thread count (--threads 0) already takes every core.
+        0 if threads <= 0 => 1,
+        0 => (std::thread::available_parallelism().map_or(1, |n| n.get()) / threads as usize).max(1),
         j => j,
     }
 }
@@ -817,10 +819,18 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 gpus_per_job,
             };
             let several = meshes.len() > 1;
+            // Check every input before submitting anything.
+            let mut stems = std::collections::HashSet::new();
             for m in &meshes {
                 if !m.is_file() {
                     anyhow::bail!("{}: no such mesh file", m.display());
                 }
+                let stem = m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                if several && !stems.insert(stem.clone()) {
+                    anyhow::bail!("{}: a second mesh named '{stem}': each exemplar needs its own run folder OUT/{stem}", m.display());
+                }
+            }
+            for m in &meshes {
                 let out = if several {
                     output.join(m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default())
                 } else {

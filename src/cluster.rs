@@ -80,6 +80,18 @@ pub fn job_graph(mesh: &Path, out: &Path, config: &Config, opts: &GraphOptions) 
         std::path::absolute(p).map_err(|e| Error::file(p, e.to_string()))
     };
     let (mesh, out, bin) = (abs(mesh)?, abs(out)?, abs(&opts.binary)?);
+    // `#SBATCH` lines are split at whitespace and `%` starts a file-name
+    // pattern there: refuse such a run folder rather than write a broken script.
+    let shown = out.display().to_string();
+    if shown.contains(char::is_whitespace) || shown.contains('%') {
+        return Err(Error::file(&out, "a cluster run folder must not contain whitespace or '%' (#SBATCH lines cannot quote them)"));
+    }
+    // A profile given as a file: absolute, since jobs start in another folder.
+    let profile = if Path::new(&opts.profile).is_file() {
+        abs(Path::new(&opts.profile))?.display().to_string()
+    } else {
+        opts.profile.clone()
+    };
     let c = &config.cluster;
     let levels = level_count(config);
     let shard = c.variants_per_job.max(1);
@@ -87,7 +99,11 @@ pub fn job_graph(mesh: &Path, out: &Path, config: &Config, opts: &GraphOptions) 
     let logs = out.join("slurm").join("logs");
     let gpu = opts.gpus_per_job > 0;
     let device = if gpu { "cuda" } else { "cpu" };
-    let stem = mesh.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "exemplar".into());
+    // The job name, reduced to characters every #SBATCH parser takes.
+    let stem: String = mesh
+        .file_stem()
+        .map(|s| s.to_string_lossy().chars().map(|c| if c.is_ascii_alphanumeric() || "_.-".contains(c) { c } else { '_' }).collect())
+        .unwrap_or_else(|| "exemplar".into());
 
     let header = |stage: &str, mem: f64, minutes: u32, array: Option<&str>, gpus: bool| {
         let mut h = String::from("#!/bin/bash\n");
@@ -114,7 +130,7 @@ pub fn job_graph(mesh: &Path, out: &Path, config: &Config, opts: &GraphOptions) 
 
     let mut encode = header("encode", c.encode_mem_gb, c.job_minutes, None, false);
     let sets: String = opts.overrides.iter().map(|o| format!(" --set {}", quote_str(o))).collect();
-    let _ = writeln!(encode, "exec {exe} stage encode {} -o {run} --profile {}{sets}", quote(&mesh), quote_str(&opts.profile));
+    let _ = writeln!(encode, "exec {exe} stage encode {} -o {run} --profile {}{sets}", quote(&mesh), quote_str(&profile));
 
     let train_array = format!("0-{}", levels - 1);
     let mut train = header("train", c.train_mem_gb, c.train_minutes, Some(&train_array), true);
@@ -154,7 +170,7 @@ pub fn submit_script(jobs: &[Job]) -> String {
     for j in jobs {
         let _ = writeln!(
             s,
-            "id=$(sbatch --parsable ${{prev:+--dependency=afterok:$prev}} {}); id=${{id%%;*}}; echo \"{} $id\"; prev=$id",
+            "id=$(sbatch --parsable ${{prev:+--dependency=afterok:$prev --kill-on-invalid-dep=yes}} {}); id=${{id%%;*}}; echo \"{} $id\"; prev=$id",
             j.file, j.stage
         );
     }
@@ -206,13 +222,23 @@ mod tests {
         assert!(jobs[2].script.contains("--seed 3") && jobs[4].script.contains("-n 10"));
         let submit = submit_script(&jobs);
         assert_eq!(submit.matches("sbatch --parsable").count(), 5);
-        assert!(submit.contains("--dependency=afterok:$prev"));
-        // The shard arithmetic, as bash evaluates it, covers 0..10 exactly once.
-        let covered: Vec<usize> = (0..3).flat_map(|t| {
-            let first = t * 4;
-            let count = if 10 - first < 4 { 10 - first } else { 4 };
-            first..first + count
-        }).collect();
+        assert!(submit.contains("--dependency=afterok:$prev --kill-on-invalid-dep=yes"));
+        // The script's own shard lines, run by bash for every array task,
+        // cover variants 0..10 exactly once.
+        let lines: String = jobs[2].script.lines().filter(|l| l.starts_with("FIRST=") || l.starts_with("COUNT=")).collect::<Vec<_>>().join("\n");
+        let mut covered = Vec::new();
+        for task in 0..3 {
+            let o = std::process::Command::new("bash")
+                .arg("-c")
+                .arg(format!("SLURM_ARRAY_TASK_ID={task}\n{lines}\necho $FIRST $COUNT"))
+                .output()
+                .unwrap();
+            let text = String::from_utf8_lossy(&o.stdout);
+            let v: Vec<usize> = text.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            covered.extend(v[0]..v[0] + v[1]);
+        }
         assert_eq!(covered, (0..10).collect::<Vec<_>>());
+        // A run folder that #SBATCH cannot hold.
+        assert!(job_graph(Path::new("/data/t.obj"), Path::new("/runs/my run"), &config, &opts).is_err());
     }
 }

@@ -185,6 +185,15 @@ impl Config {
     pub fn stage_digest(&self, stage: &str) -> String {
         let part = match stage {
             "encode" => toml::to_string(&self.encode),
+            "sample" => [
+                toml::to_string(&self.encode),
+                toml::to_string(&self.model),
+                toml::to_string(&self.train),
+                toml::to_string(&self.sample),
+            ]
+            .into_iter()
+            .collect::<Result<Vec<_>, _>>()
+            .map(|v| v.join("\n")),
             "train" => [toml::to_string(&self.encode), toml::to_string(&self.model), toml::to_string(&self.train)]
                 .into_iter()
                 .collect::<Result<Vec<_>, _>>()

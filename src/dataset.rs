@@ -190,7 +190,7 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
             .collect();
         entries.sort();
         for p in entries {
-            if p.is_dir() {
+            if p.is_dir() && !p.is_symlink() {
                 walk(&p, out)?;
             } else if p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with("level_") && n.ends_with(".vdb")) {
                 out.push(p);
@@ -200,6 +200,8 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
     }
     let mut files = Vec::new();
     walk(a, &mut files)?;
+    let mut in_b = Vec::new();
+    walk(b, &mut in_b)?;
     let mut report = LevelComparison { compared: files.len(), ..Default::default() };
     for fa in files {
         let rel = fa.strip_prefix(a).unwrap_or(&fa).to_path_buf();
@@ -219,6 +221,12 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
             && la.mask.iter().map(|m| m.to_bits()).eq(lb.mask.iter().map(|m| m.to_bits()));
         if !same {
             report.differences.push(format!("{}: {} vs {} voxels, features differ", rel.display(), la.len(), lb.len()));
+        }
+    }
+    for fb in in_b {
+        let rel = fb.strip_prefix(b).unwrap_or(&fb).to_path_buf();
+        if !a.join(&rel).is_file() {
+            report.differences.push(format!("{}: only in {}", rel.display(), b.display()));
         }
     }
     Ok(report)

@@ -160,25 +160,48 @@ pub fn evaluate(
         }
         None => Voxelisation::Surface,
     };
+    // A variant whose finer levels were pruned away stops at a coarser level:
+    // reported, not scored against the exemplar's finest level.
+    let (variants, stopped): (Vec<&VariantFiles>, Vec<&VariantFiles>) =
+        variants.iter().partition(|v| v.finest.resolution == ex_fine.resolution);
+    let stopped: Vec<String> = stopped
+        .iter()
+        .map(|v| {
+            format!(
+                "{}: its finest level is level {} ({}^3), not the exemplar's {}^3 (the finer levels were pruned away)",
+                v.name, v.finest.index, v.finest.resolution, ex_fine.resolution
+            )
+        })
+        .collect();
+    if variants.is_empty() {
+        return Err(Error::Invalid(format!("no variant can be scored: {}", stopped.join("; "))));
+    }
     let frame = ex_fine.frame;
     let ex_points = points_normalised(ex_fine);
     let variant_points: Vec<Vec<Vec3>> = variants.iter().map(|v| points_normalised(&v.finest)).collect();
     let margin = metrics::DEFAULT_MARGIN;
+    // The union of the shapes' boxes, clipped to the exemplar's box plus one
+    // normalised unit (half its diagonal) on each side: a stray point of a
+    // diverged variant must not make the lattice huge.
+    let clip = |(lo, hi): (Vec3, Vec3), (elo, ehi): (Vec3, Vec3)| (lo.max(elo - Vec3::ONE), hi.min(ehi + Vec3::ONE));
     let (grid, filled) = match (mode, exemplar_mesh) {
         (Voxelisation::Solid, Some(m)) => {
             let ex_box = mesh_bounds(m, frame)
                 .ok_or_else(|| Error::Invalid("the exemplar mesh has no finite vertex".into()))?;
             let all = variants.iter().filter_map(|v| v.mesh.as_ref()).fold(Some(ex_box), |b, vm| union(b, mesh_bounds(vm, frame)));
-            let (lo, hi) = all.unwrap_or(ex_box);
+            let (lo, hi) = clip(all.unwrap_or(ex_box), ex_box);
             let voxel = (ex_box.1 - ex_box.0).max_element() / resolution.max(1) as f32;
-            (OccupancyGrid::covering(frame, lo, hi, voxel, margin, None), m.is_closed())
+            // Anchored at the exemplar's box, so its voxelisation is the same
+            // whatever variants are evaluated with it.
+            (OccupancyGrid::covering(frame, lo, hi, voxel, margin, Some(ex_box.0)), m.is_closed())
         }
         _ => {
-            let all = variant_points.iter().fold(bounds(&ex_points), |b, p| union(b, bounds(p)));
-            let (lo, hi) = all.ok_or_else(|| Error::file(exemplar_dir, "the finest level has no finite point"))?;
+            let ex_box = bounds(&ex_points).ok_or_else(|| Error::file(exemplar_dir, "the finest level has no finite point"))?;
+            let all = variant_points.iter().fold(Some(ex_box), |b, p| union(b, bounds(p)));
+            let (lo, hi) = clip(all.unwrap_or(ex_box), ex_box);
             // Aligned with the finest level's grid lines (-1 + k * voxel).
             let voxel = ex_fine.voxel_size() as f32;
-            (OccupancyGrid::covering(frame, lo, hi, voxel, margin, Some(-1.0)), false)
+            (OccupancyGrid::covering(frame, lo, hi, voxel, margin, Some(Vec3::splat(-1.0))), false)
         }
     };
     let half = grid.halved();
@@ -216,12 +239,14 @@ pub fn evaluate(
             coarse_points: Some(c),
         })
         .collect();
-    metrics::check_shape(&exemplar).map_err(|e| Error::Invalid(format!("the exemplar cannot be scored: {e}")))?;
+    metrics::check_shape(&exemplar)
+        .map_err(|e| Error::file(exemplar_dir, format!("the exemplar cannot be scored: {e}")))?;
     // A degenerate variant (empty, or filling the lattice) is reported, not
     // scored: a score for it would be meaningless, and the rest still count.
     let (inputs, unscored): (Vec<ShapeInput>, Vec<ShapeInput>) =
         inputs.into_iter().partition(|v| metrics::check_shape(v).is_ok());
-    let unscored: Vec<String> = unscored.iter().filter_map(|v| metrics::check_shape(v).err()).map(|e| e.to_string()).collect();
+    let mut unscored: Vec<String> = unscored.iter().filter_map(|v| metrics::check_shape(v).err()).map(|e| e.to_string()).collect();
+    unscored.extend(stopped);
     for u in &unscored {
         log::warn!("eval: not scored: {u}");
     }

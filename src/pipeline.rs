@@ -167,8 +167,33 @@ pub fn train_in_processes(
     let style = indicatif::ProgressStyle::with_template("level {prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} {msg}")
         .expect("valid template");
     let mut running: Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)> = Vec::new();
+    let result = schedule(models, &mut queue, &mut running, jobs, &bars, &style, &total, &child);
+    if result.is_err() {
+        // Leave no orphan training on: stop the children still running.
+        for (_, process, bar, _) in running.iter_mut() {
+            let _ = process.kill();
+            let _ = process.wait();
+            bar.abandon_with_message("stopped");
+        }
+    }
+    result?;
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn schedule(
+    models: &Path,
+    queue: &mut Vec<usize>,
+    running: &mut Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)>,
+    jobs: usize,
+    bars: &indicatif::MultiProgress,
+    style: &indicatif::ProgressStyle,
+    total: &dyn Fn(usize) -> usize,
+    child: &dyn Fn(usize) -> std::process::Command,
+) -> Result<()> {
     let mut failed: Vec<String> = Vec::new();
     let t0 = Instant::now();
+    let count = queue.len();
     while !queue.is_empty() || !running.is_empty() {
         while running.len() < jobs.max(1) && failed.is_empty() {
             let Some(k) = queue.pop() else { break };
@@ -178,7 +203,7 @@ pub fn train_in_processes(
                 .stdout(std::process::Stdio::null())
                 .stderr(log)
                 .spawn()
-                .map_err(|e| Error::Invalid(format!("cannot start the training process of level {k}: {e}")))?;
+                .map_err(|e| Error::Invalid(format!("cannot start the training process of level {k} ({e})")))?;
             let bar = bars.add(indicatif::ProgressBar::new(total(k) as u64));
             bar.set_style(style.clone());
             bar.set_prefix(k.to_string());
@@ -211,7 +236,7 @@ pub fn train_in_processes(
     if !failed.is_empty() {
         return Err(Error::Invalid(failed.join("; ")));
     }
-    log::info!("train: {} levels on {} processes in {:.0} s", todo.len(), jobs.max(1), t0.elapsed().as_secs_f64());
+    log::info!("train: {count} levels on {} processes in {:.0} s", jobs.max(1), t0.elapsed().as_secs_f64());
     Ok(())
 }
 
@@ -287,6 +312,17 @@ pub fn variant_dir(variants_dir: &Path, i: usize) -> PathBuf {
 /// Writes one variant's levels (and previews) into its folder.
 pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, previews: bool) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    // What an earlier sampling left (levels that are now empty, a mesh of
+    // other levels) must not be read as part of this variant.
+    for e in std::fs::read_dir(dir).map_err(|e| Error::file(dir, e.to_string()))?.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let stale = (name.starts_with("level_") && (name.ends_with(".vdb") || name.ends_with(".png")))
+            || name.starts_with("mesh.")
+            || name.starts_with("stage_");
+        if stale {
+            std::fs::remove_file(e.path()).map_err(|err| Error::file(&e.path(), err.to_string()))?;
+        }
+    }
     for level in levels {
         if level.is_empty() {
             log::warn!("{}: level {} is empty after pruning", dir.display(), level.index);
@@ -322,7 +358,7 @@ pub fn sample_stage(
     // What a variant depends on: the configuration, the trained models, the
     // sampling options except which shard computed it, and its index.
     let common = digest(&[
-        &config.digest(),
+        &config.stage_digest("sample"),
         &std::fs::read_to_string(train::state_path(models_dir, exemplar_levels.len() - 1)).unwrap_or_default(),
         &format!("{:?}", SampleOptions { first: 0, n: 0, ..options.clone() }),
     ]);
@@ -411,9 +447,21 @@ pub fn mesh_level(
 pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Result<usize> {
     let mut done = 0;
     for dir in dirs {
-        let files = crate::evaluate::read_variant(dir)?;
+        let files = match crate::evaluate::read_variant(dir) {
+            Ok(f) => f,
+            Err(e) => {
+                log::warn!("not meshed: {e}");
+                continue;
+            }
+        };
         let out = dir.join("mesh.ply");
-        let d = digest(&[&format!("{:?}", files.finest.len()), &resolution.to_string(), &exemplar_open.to_string()]);
+        // The mesh depends on the finest level's data: its file's digest.
+        let finest_file = dir.join(dataset::level_file_name(files.finest.index));
+        let d = digest(&[
+            &dataset::file_sha256(&finest_file).unwrap_or_default(),
+            &resolution.to_string(),
+            &exemplar_open.to_string(),
+        ]);
         if is_done(dir, "mesh", &d) && out.is_file() {
             done += 1;
             continue;
@@ -426,7 +474,11 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
                 mark_done(dir, "mesh", &d, 0.0)?;
                 done += 1;
             }
-            Err(e) => log::warn!("{}: not meshed: {e}", dir.display()),
+            Err(e) => {
+                // No mesh rather than a stale one.
+                let _ = std::fs::remove_file(&out);
+                log::warn!("{}: not meshed: {e}", dir.display());
+            }
         }
     }
     Ok(done)
@@ -439,9 +491,17 @@ pub fn finest_in(dir: &Path) -> Result<(String, Level)> {
     Ok((files.name, files.finest))
 }
 
-/// Writes `OUT/contact_sheet.png` of (name, level) pairs, the first the reference.
+/// Most entries on one contact sheet (the reference and 35 more): a larger set
+/// would make an image no one can read, and one over the size limit.
+pub const SHEET_MAX: usize = 36;
+
+/// Writes `OUT/contact_sheet.png` of (name, level) pairs, the first the
+/// reference; past [`SHEET_MAX`] entries, the first ones.
 pub fn write_contact_sheet(path: &Path, entries: &[(String, Level)]) -> Result<()> {
-    let refs: Vec<(String, &Level)> = entries.iter().map(|(n, l)| (n.clone(), l)).collect();
+    if entries.len() > SHEET_MAX {
+        log::info!("contact sheet: the first {} of {} shapes", SHEET_MAX, entries.len());
+    }
+    let refs: Vec<(String, &Level)> = entries.iter().take(SHEET_MAX).map(|(n, l)| (n.clone(), l)).collect();
     let sheet = render::contact_sheet(&refs, &render::SheetOptions::default())?;
     render::save_png(&sheet, path)?;
     Ok(())
@@ -498,6 +558,9 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
         config_digest: config.map(|c| c.digest()).unwrap_or_default(),
         exemplar_open: manifest.open_surface,
     };
+    if !rungs.iter().any(|(r, _)| *r == Rung::Untrained) {
+        let _ = std::fs::remove_dir_all(out.join(Rung::Untrained.name()));
+    }
     ladder::write_rungs(out, &rungs, &provenance)?;
     let files: Vec<crate::evaluate::VariantFiles> = rungs
         .iter()
@@ -611,7 +674,16 @@ pub fn run_sample(paths: &RunPaths, config: &Config, device: tch::Device, option
 /// Stage 4: meshes the variants with indices in `range` that exist.
 pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>) -> Result<usize> {
     let manifest = dataset::read_manifest(&paths.exemplar())?;
-    let dirs: Vec<PathBuf> = range.map(|i| variant_dir(&paths.variants(), i)).filter(|d| d.is_dir()).collect();
+    let dirs: Vec<PathBuf> = range
+        .map(|i| variant_dir(&paths.variants(), i))
+        .filter(|d| {
+            let done = stamp_path(d, "sample").is_file();
+            if d.is_dir() && !done {
+                log::warn!("{}: its sampling did not finish: not meshed", d.display());
+            }
+            done
+        })
+        .collect();
     mesh_stage(&dirs, manifest.open_surface, 256)
 }
 
@@ -620,11 +692,23 @@ pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>) -> Result<usize
 pub fn run_eval(paths: &RunPaths, n: usize) -> Result<crate::evaluate::Evaluation> {
     let (_, levels) = dataset::read(&paths.exemplar())?;
     let dirs: Vec<PathBuf> = (0..n).map(|i| variant_dir(&paths.variants(), i)).collect();
-    if let Some(missing) = dirs.iter().find(|d| !d.is_dir()) {
-        return Err(Error::file(missing, "is missing: sample it first (did a sampling job fail?)"));
+    if let Some(missing) = dirs.iter().find(|d| !stamp_path(d, "sample").is_file()) {
+        return Err(Error::file(missing, "is missing or its sampling did not finish: sample it first (did a sampling job fail?)"));
     }
-    let files = dirs.iter().map(|d| crate::evaluate::read_variant(d)).collect::<Result<Vec<_>>>()?;
-    let evaluation = crate::evaluate::evaluate(&paths.exemplar(), None, &files, 256)?;
+    // A variant whose levels were all pruned away has no level file: reported, not scored.
+    let mut unreadable = Vec::new();
+    let mut files = Vec::new();
+    for d in &dirs {
+        match crate::evaluate::read_variant(d) {
+            Ok(f) => files.push(f),
+            Err(e) => unreadable.push(e.to_string()),
+        }
+    }
+    if files.is_empty() {
+        return Err(Error::Invalid(format!("no variant can be scored: {}", unreadable.join("; "))));
+    }
+    let mut evaluation = crate::evaluate::evaluate(&paths.exemplar(), None, &files, 256)?;
+    evaluation.unscored.extend(unreadable);
     evaluation.write_json(&paths.eval_json())?;
     let mut sheet = vec![("exemplar".to_string(), levels[levels.len() - 1].clone())];
     sheet.extend(files.into_iter().map(|f| (f.name, f.finest)));

@@ -193,7 +193,10 @@ pub fn colour_scores(shape: &ColourPatches, exemplar: &ColourPatches, params: &C
     let fscore = if precision + coverage > 0.0 { 2.0 * precision * coverage / (precision + coverage) } else { 0.0 };
     let mean_nearest = |from: &ColourPatches, to: &ColourPatches, seed: u64| -> f64 {
         let q = from.sample(params.max_samples, seed);
-        q.par_iter().map(|d| to.nearest(d) as f64).sum::<f64>() / q.len().max(1) as f64
+        // Collected, then summed in order: a parallel float sum's order (and
+        // last bits) would depend on the scheduling.
+        let d: Vec<f64> = q.par_iter().map(|d| to.nearest(d) as f64).collect();
+        d.iter().sum::<f64>() / q.len().max(1) as f64
     };
     let es = spread(&exemplar.colours);
     ColourScores {
@@ -272,7 +275,7 @@ pub fn sliced_wasserstein(a: &[Vec3], b: &[Vec3], slices: usize, seed: u64) -> f
         })
         .collect();
     const Q: usize = 1000;
-    let total: f64 = dirs
+    let per_direction: Vec<f64> = dirs
         .par_iter()
         .map(|d| {
             let proj = |s: &[Vec3]| {
@@ -284,8 +287,8 @@ pub fn sliced_wasserstein(a: &[Vec3], b: &[Vec3], slices: usize, seed: u64) -> f
             let q = |p: &[f32], t: f64| p[((t * p.len() as f64) as usize).min(p.len() - 1)] as f64;
             (0..Q).map(|k| (k as f64 + 0.5) / Q as f64).map(|t| (q(&pa, t) - q(&pb, t)).abs()).sum::<f64>() / Q as f64
         })
-        .sum();
-    total / dirs.len() as f64
+        .collect();
+    per_direction.iter().sum::<f64>() / dirs.len() as f64
 }
 
 #[cfg(test)]

@@ -61,6 +61,11 @@ pub const DEFAULT_RESOLUTION: u32 = 256;
 /// (2/16), the most a variant grown from the exemplar's coarse box can stick out.
 pub const DEFAULT_MARGIN: f32 = 0.125;
 
+/// Lattice origins fall on multiples of this many voxels (twice the patch
+/// stride of 5, so both the stride cells and the half-resolution pairs are
+/// the same in every evaluation).
+pub const ALIGN_VOXELS: u32 = 10;
+
 /// The evaluation lattice, shared by the exemplar and all its variants.
 /// Voxel `(i, j, k)` covers `origin + [i, i+1) x [j, j+1) x [k, k+1) * voxel` in
 /// normalised units.
@@ -100,9 +105,11 @@ impl OccupancyGrid {
     /// Lattice of voxels of edge `voxel` (normalised units) covering the box
     /// `[lo, hi]` (normalised units) plus `margin` on every side. With
     /// `align`, voxel boundaries fall on `align + k * voxel` (a level's own
-    /// grid lines, so each level voxel is one lattice voxel); else the lattice
-    /// is centred on the box.
-    pub fn covering(frame: Frame, lo: Vec3, hi: Vec3, voxel: f32, margin: f32, align: Option<f32>) -> Self {
+    /// grid lines, so each level voxel is one lattice voxel) and the origin on
+    /// a multiple of [`ALIGN_VOXELS`] voxels from `align`, so that the patch
+    /// cells and the half-resolution lattice pair the same voxels whatever
+    /// else the lattice covers; else the lattice is centred on the box.
+    pub fn covering(frame: Frame, lo: Vec3, hi: Vec3, voxel: f32, margin: f32, align: Option<Vec3>) -> Self {
         let voxel = if voxel.is_finite() && voxel > 0.0 { voxel } else { 2.0 / DEFAULT_RESOLUTION as f32 };
         let (lo, hi) = (lo - Vec3::splat(margin.max(0.0)), hi + Vec3::splat(margin.max(0.0)));
         let mut dims = [0u32; 3];
@@ -110,7 +117,9 @@ impl OccupancyGrid {
         for a in 0..3 {
             match align {
                 Some(g) => {
-                    let first = ((lo[a] - g) / voxel).floor();
+                    let g = g[a];
+                    let k = ALIGN_VOXELS as f32;
+                    let first = (((lo[a] - g) / voxel).floor() / k).floor() * k;
                     let last = ((hi[a] - g) / voxel).ceil();
                     origin[a] = g + first * voxel;
                     dims[a] = (last - first).max(1.0) as u32;
@@ -1563,7 +1572,11 @@ impl EvalReport {
             variants.iter().map(|v| serde_json::to_value(v).expect("scores serialise")).collect();
         let mut mean: VariantScores = match serde_json::from_value(mean_json(&rows)) {
             Ok(m) if !variants.is_empty() => m,
-            _ => VariantScores::zero(),
+            Ok(_) => VariantScores::zero(),
+            Err(e) => {
+                log::warn!("eval: the mean row cannot be formed ({e}): a figure is not finite for every variant");
+                VariantScores::zero()
+            }
         };
         mean.name = "mean".into();
         EvalReport { parameters, variants, mean, diversity, set_coverage }
@@ -2128,10 +2141,11 @@ mod tests {
 
     #[test]
     fn covering_lattice_aligns_with_a_level_grid() {
-        let g = OccupancyGrid::covering(Frame::default(), Vec3::splat(-0.3), Vec3::new(0.5, 0.2, 0.1), 2.0 / 64.0, 0.1, Some(-1.0));
+        let g = OccupancyGrid::covering(Frame::default(), Vec3::splat(-0.3), Vec3::new(0.5, 0.2, 0.1), 2.0 / 64.0, 0.1, Some(Vec3::splat(-1.0)));
         for a in 0..3 {
             let k = (g.origin[a] + 1.0) / g.voxel;
             assert!((k - k.round()).abs() < 1e-4, "origin on a grid line: {g:?}");
+            assert_eq!(k.round() as i64 % ALIGN_VOXELS as i64, 0, "origin on a multiple of 10 voxels: {g:?}");
             assert!(g.origin[a] <= -0.4 + 1e-6);
         }
         assert!(g.origin.x + g.dims[0] as f32 * g.voxel >= 0.6 - 1e-6);
