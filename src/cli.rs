@@ -534,7 +534,10 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
     println!("  contact sheet    {}", paths.contact_sheet().display());
     println!("  time             {}  (total {:.0} s)",
         times.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect::<Vec<_>>().join(", "), t0.elapsed().as_secs_f64());
-    print!("{}", evaluation.table());
+    match evaluation {
+        Some(e) => print!("{}", e.table()),
+        None => println!("  (no variant could be scored: see the warning above)"),
+    }
     Ok(())
 }
 
@@ -570,10 +573,10 @@ fn run_stage(stage: StageCmd, quiet: bool) -> Result<()> {
             let done = pipeline::run_mesh(&pipeline::RunPaths::new(&dir), first..first + n)?;
             println!("{done} variants meshed");
         }
-        StageCmd::Eval { dir, n } => {
-            let evaluation = pipeline::run_eval(&pipeline::RunPaths::new(&dir), n)?;
-            print!("{}", evaluation.table());
-        }
+        StageCmd::Eval { dir, n } => match pipeline::run_eval(&pipeline::RunPaths::new(&dir), n)? {
+            Some(evaluation) => print!("{}", evaluation.table()),
+            None => anyhow::bail!("{}: no variant can be scored (see the warning above)", dir.display()),
+        },
     }
     Ok(())
 }

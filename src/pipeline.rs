@@ -688,8 +688,10 @@ pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>) -> Result<usize
 }
 
 /// Stage 5: scores variants `0..n` against the exemplar into
-/// `OUT/eval.json`, and draws `OUT/contact_sheet.png`.
-pub fn run_eval(paths: &RunPaths, n: usize) -> Result<crate::evaluate::Evaluation> {
+/// `OUT/eval.json`, and draws `OUT/contact_sheet.png`. `Ok(None)` (and a
+/// warning naming the cause, no eval.json) when no variant can be scored,
+/// e.g. every one was pruned away before the finest level.
+pub fn run_eval(paths: &RunPaths, n: usize) -> Result<Option<crate::evaluate::Evaluation>> {
     let (_, levels) = dataset::read(&paths.exemplar())?;
     let dirs: Vec<PathBuf> = (0..n).map(|i| variant_dir(&paths.variants(), i)).collect();
     if let Some(missing) = dirs.iter().find(|d| !stamp_path(d, "sample").is_file()) {
@@ -704,14 +706,25 @@ pub fn run_eval(paths: &RunPaths, n: usize) -> Result<crate::evaluate::Evaluatio
             Err(e) => unreadable.push(e.to_string()),
         }
     }
-    if files.is_empty() {
-        return Err(Error::Invalid(format!("no variant can be scored: {}", unreadable.join("; "))));
-    }
-    let mut evaluation = crate::evaluate::evaluate(&paths.exemplar(), None, &files, 256)?;
-    evaluation.unscored.extend(unreadable);
-    evaluation.write_json(&paths.eval_json())?;
     let mut sheet = vec![("exemplar".to_string(), levels[levels.len() - 1].clone())];
-    sheet.extend(files.into_iter().map(|f| (f.name, f.finest)));
+    sheet.extend(files.iter().map(|f| (f.name.clone(), f.finest.clone())));
     write_contact_sheet(&paths.contact_sheet(), &sheet)?;
-    Ok(evaluation)
+    let evaluation = if files.is_empty() {
+        Err(Error::Invalid(format!("no variant can be scored: {}", unreadable.join("; "))))
+    } else {
+        crate::evaluate::evaluate(&paths.exemplar(), None, &files, 256)
+    };
+    match evaluation {
+        Ok(mut e) => {
+            e.unscored.extend(unreadable);
+            e.write_json(&paths.eval_json())?;
+            Ok(Some(e))
+        }
+        Err(Error::Invalid(msg)) if msg.starts_with("no variant can be scored") => {
+            let _ = std::fs::remove_file(paths.eval_json());
+            log::warn!("evaluate: {msg}");
+            Ok(None)
+        }
+        Err(e) => Err(e),
+    }
 }
