@@ -307,6 +307,7 @@ mod tests {
         let mut file = h.to_vec();
         file.extend(std::iter::repeat(0u8).take(36));
         file.extend([3u8, 0, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0]);
+        assert_eq!(file.len() as u64, len, "the header, 3 vertices of 12 bytes, one 13-byte face");
         assert_eq!(check_ply(&file).unwrap(), Declared { vertices: Some(3), faces: Some(1) });
         let e = check_ply(&file[..file.len() - 20]).unwrap_err();
         assert!(e.contains("truncated"), "{e}");
