@@ -517,9 +517,32 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
     times.push(("train", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
     let options = SampleOptions::from_config(&config, args.n, args.seed);
+    // Variants are independent: with several jobs, shards of them are sampled
+    // and meshed by child processes (`stage sample/mesh --first K -n N`), which
+    // write exactly what one process writes.
+    let exe = std::env::current_exe()?;
+    let logs = out.join("logs");
+    if jobs > 1 && args.n > 1 {
+        std::fs::create_dir_all(&logs)?;
+        pipeline::run_shards(args.n, jobs, &logs, "sample", |first, count| {
+            let mut c = std::process::Command::new(&exe);
+            c.args(["--threads", &threads.max(1).to_string(), "stage", "sample"])
+                .arg(out)
+                .args(["--first", &first.to_string(), "-n", &count.to_string(), "--seed", &args.seed.to_string()])
+                .args(["--device", &args.setup.device]);
+            c
+        })?;
+    }
     let dirs = pipeline::run_sample(&paths, &config, device, &options)?;
     times.push(("sample", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
+    if jobs > 1 && args.n > 1 {
+        pipeline::run_shards(args.n, jobs, &logs, "mesh", |first, count| {
+            let mut c = std::process::Command::new(&exe);
+            c.args(["stage", "mesh"]).arg(out).args(["--first", &first.to_string(), "-n", &count.to_string()]);
+            c
+        })?;
+    }
     let meshed = pipeline::run_mesh(&paths, 0..args.n)?;
     log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
     times.push(("mesh", t.elapsed().as_secs_f64()));

@@ -11,6 +11,8 @@
 //! OUT/models/                      checkpoints, training state, loss plots
 //! OUT/variants/variant_000/        level_K.vdb, level_K.png, mesh.ply, mesh.png
 //! OUT/eval.json                    metrics
+//! OUT/contact_sheet.png            the exemplar and the variants, one camera
+//! OUT/logs/                        logs of sampling/meshing child processes
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -238,6 +240,57 @@ fn schedule(
     }
     log::info!("train: {count} levels on {} processes in {:.0} s", jobs.max(1), t0.elapsed().as_secs_f64());
     Ok(())
+}
+
+/// Runs shards `0..n` of a stage as at most `jobs` concurrent child processes,
+/// `child(first, count)` building each one's command (e.g. `stage sample OUT
+/// --first K -n N`), with `jobs` contiguous shards of near-equal size. Each
+/// child's stderr goes to `log_dir/<what>_K.log`; fails naming every shard
+/// that failed and the last line of its log.
+pub fn run_shards(
+    n: usize,
+    jobs: usize,
+    log_dir: &Path,
+    what: &str,
+    child: impl Fn(usize, usize) -> std::process::Command,
+) -> Result<()> {
+    let jobs = jobs.clamp(1, n.max(1));
+    let mut running = Vec::new();
+    let mut first = 0;
+    for j in 0..jobs {
+        let count = n / jobs + usize::from(j < n % jobs);
+        if count == 0 {
+            continue;
+        }
+        let log_path = log_dir.join(format!("{what}_{first}.log"));
+        let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
+        let spawned = child(first, count).stdout(std::process::Stdio::null()).stderr(log).spawn();
+        match spawned {
+            Ok(c) => running.push((first, c, log_path)),
+            Err(e) => {
+                for (_, c, _) in running.iter_mut() {
+                    let _ = c.kill();
+                    let _ = c.wait();
+                }
+                return Err(Error::Invalid(format!("cannot start a {what} process ({e})")));
+            }
+        }
+        first += count;
+    }
+    let mut failed = Vec::new();
+    for (first, mut c, log_path) in running {
+        let status = c.wait().map_err(|e| Error::Invalid(format!("{what} shard {first}: {e}")))?;
+        if !status.success() {
+            let text = std::fs::read_to_string(&log_path).unwrap_or_default();
+            let last = text.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no output").to_string();
+            failed.push(format!("{what} from variant {first} failed ({status}): {last} (log: {})", log_path.display()));
+        }
+    }
+    if failed.is_empty() {
+        Ok(())
+    } else {
+        Err(Error::Invalid(failed.join("; ")))
+    }
 }
 
 /// Steps a training log reports (upsampler steps, then diffusion steps,
