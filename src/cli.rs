@@ -500,11 +500,7 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
         Source::File(p) => pipeline::ExemplarSource::File(p),
         Source::Demo => pipeline::ExemplarSource::Demo,
     };
-    pipeline::run_encode(exemplar, &paths, &config)?;
-    let source_name = match &source {
-        Source::File(p) => p.display().to_string(),
-        Source::Demo => "(embedded demo exemplar)".to_string(),
-    };
+    let (source_name, _) = pipeline::run_encode(exemplar, &paths, &config)?;
     times.push(("encode", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
     let jobs = auto_jobs(args.jobs, device, threads);

@@ -35,9 +35,8 @@ pub struct VariantFiles {
     pub mesh: Option<Mesh>,
 }
 
-/// Reads a variant folder: the highest and lowest `level_K.vdb` present and
-/// `mesh.ply` if there.
-pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
+/// The `level_K.vdb` files of a folder, coarsest first (none read).
+pub fn level_files(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
     let mut levels: Vec<(usize, PathBuf)> = std::fs::read_dir(dir)
         .map_err(|e| Error::file(dir, e.to_string()))?
         .filter_map(|e| e.ok())
@@ -48,9 +47,17 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
         })
         .collect();
     levels.sort();
-    let (Some(lo), Some(hi)) = (levels.first(), levels.last()) else {
+    if levels.is_empty() {
         return Err(Error::file(dir, "holds no level_K.vdb files"));
-    };
+    }
+    Ok(levels)
+}
+
+/// Reads a variant folder: the highest and lowest `level_K.vdb` present and
+/// `mesh.ply` if there.
+pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
+    let levels = level_files(dir)?;
+    let (lo, hi) = (&levels[0], &levels[levels.len() - 1]);
     let (finest, _) = vdb::read_level(&hi.1)?;
     let (coarsest, _) = vdb::read_level(&lo.1)?;
     let mesh_path = dir.join("mesh.ply");

@@ -500,16 +500,16 @@ pub fn mesh_level(
 pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Result<usize> {
     let mut done = 0;
     for dir in dirs {
-        let files = match crate::evaluate::read_variant(dir) {
-            Ok(f) => f,
+        // The mesh depends on the finest level's data: its file's digest,
+        // checked before anything is read (a finished mesh costs one hash).
+        let finest_file = match crate::evaluate::level_files(dir) {
+            Ok(files) => files[files.len() - 1].1.clone(),
             Err(e) => {
                 log::warn!("not meshed: {e}");
                 continue;
             }
         };
         let out = dir.join("mesh.ply");
-        // The mesh depends on the finest level's data: its file's digest.
-        let finest_file = dir.join(dataset::level_file_name(files.finest.index));
         let d = digest(&[
             &dataset::file_sha256(&finest_file).unwrap_or_default(),
             &resolution.to_string(),
@@ -519,7 +519,14 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
             done += 1;
             continue;
         }
-        match mesh_level(&files.finest, exemplar_open, None, resolution) {
+        let finest = match vdb::read_level(&finest_file) {
+            Ok((level, _)) => level,
+            Err(e) => {
+                log::warn!("not meshed: {e}");
+                continue;
+            }
+        };
+        match mesh_level(&finest, exemplar_open, None, resolution) {
             Ok((mesh, _)) => {
                 crate::mesh::save(&mesh, &out, true)?;
                 let img = render::render_mesh(&mesh, &preview_options())?;
@@ -540,8 +547,10 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
 /// The finest level in a folder of `level_K.vdb` files (a variant folder, an
 /// encoded exemplar, a ladder rung), with the folder's name.
 pub fn finest_in(dir: &Path) -> Result<(String, Level)> {
-    let files = crate::evaluate::read_variant(dir)?;
-    Ok((files.name, files.finest))
+    let files = crate::evaluate::level_files(dir)?;
+    let (finest, _) = vdb::read_level(&files[files.len() - 1].1)?;
+    let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    Ok((name, finest))
 }
 
 /// Most entries on one contact sheet (the reference and 35 more): a larger set
@@ -692,7 +701,10 @@ pub enum ExemplarSource<'a> {
 /// Stage 1: records the configuration in the run folder and encodes the
 /// exemplar into `OUT/exemplar` (the demo exemplar is also written as
 /// `exemplar.ply` and `exemplar.png`).
-pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> Result<(Mesh, Vec<Level>)> {
+/// Returns the exemplar's name as reports show it (its path, or the demo's) and
+/// its levels.
+pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> Result<(String, Vec<Level>)> {
+    let demo = matches!(source, ExemplarSource::Demo);
     let (mesh, name, sha) = match source {
         ExemplarSource::File(p) => (crate::mesh::load(p)?, p.display().to_string(), dataset::file_sha256(p)?),
         ExemplarSource::Demo => {
@@ -702,12 +714,12 @@ pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> 
         }
     };
     record_config(&paths.root, config)?;
-    if name.starts_with("(embedded") {
+    if demo {
         crate::mesh::save(&mesh, &paths.root.join("exemplar.ply"), true)?;
         render::save_png(&render::render_mesh(&mesh, &preview_options())?, &paths.root.join("exemplar.png"))?;
     }
     let levels = encode_stage(&mesh, &name, &sha, config, &paths.exemplar())?;
-    Ok((mesh, levels))
+    Ok((name, levels))
 }
 
 /// Stage 2: trains every level (or `only` one, as one task of a job array)

@@ -39,7 +39,7 @@
 
 mod apss;
 mod contour;
-mod spatial;
+pub(crate) mod spatial;
 #[cfg(test)]
 mod tests;
 

@@ -2,8 +2,11 @@
 //! clean failures that leave nothing behind.
 
 mod common;
+#[path = "common/hostile.rs"]
+mod hostile;
 
 use common::*;
+use hostile::sphere_level;
 use std::path::Path;
 use shapeshifter::{dataset, exemplar, mesh, vdb};
 
@@ -138,30 +141,6 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     }
     assert!(!out.join("corrupt").join("eval.json").exists());
     assert!(!out.join("aborted").join("eval.json").exists());
-}
-
-/// A level of `n` voxels on a small sphere (points on the surface, outward normals).
-fn sphere_level(n: usize) -> shapeshifter::level::Level {
-    use glam::{IVec3, Vec3};
-    let mut level = shapeshifter::level::Level { index: 2, resolution: 64, ..Default::default() };
-    let mut seen = std::collections::HashSet::new();
-    for i in 0..n * 4 {
-        // Fibonacci sphere, radius 20 voxels.
-        let y = 1.0 - 2.0 * (i as f32 + 0.5) / (n * 4) as f32;
-        let phi = i as f32 * 2.399_963;
-        let r = (1.0 - y * y).sqrt();
-        let d = Vec3::new(r * phi.cos(), y, r * phi.sin());
-        let p = d * 20.0;
-        let c = p.round().as_ivec3();
-        if level.len() < n && seen.insert(c) {
-            level.coords.push(c + IVec3::splat(32));
-            level.offsets.push((p - c.as_vec3()).clamp(Vec3::splat(-0.5), Vec3::splat(0.5)));
-            level.normals.push(d);
-            level.colours.push(Vec3::new(0.8, 0.5, 0.2));
-            level.mask.push(1.0);
-        }
-    }
-    level
 }
 
 #[test]
