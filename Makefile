@@ -6,7 +6,7 @@
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup build demo test bench fuzz clean cluster-test
+.PHONY: setup build demo test bench fuzz clean cluster-test interop
 
 setup:
 	@bash scripts/setup.sh
@@ -26,6 +26,13 @@ test: setup
 cluster-test: build
 	cargo build --release $(CARGO_FEATURES) --example demo_exemplar
 	bash scripts/cluster-test.sh
+
+# The files we write opened by real clients: OpenVDB's vdb_print, Debian's
+# pyopenvdb, Blender (headless) and Chromium (report.html); installs them from
+# Debian when missing. CI runs it after `make test`.
+interop: build
+	cargo build --release $(CARGO_FEATURES) --example demo_exemplar
+	bash scripts/interop-test.sh
 
 # Every benchmark of the README's performance table (the ruined tower from
 # ../shared/data where it is present; synthetic shapes stand in otherwise).

@@ -19,6 +19,7 @@
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
 #include <map>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 
@@ -42,18 +43,26 @@ unsigned char to_byte(float c) {
 
 // OpenMesh reports problems on its own streams; we report them ourselves.
 void silence_openmesh() {
-  static bool done = false;
-  if (!done) {
+  static std::once_flag once;
+  std::call_once(once, [] {
     omerr().disable();
     omlog().disable();
     omout().disable();
-    done = true;
-  }
+  });
+}
+
+// One OpenMesh read or write at a time in the process: its readers and
+// writers are singletons that keep per-file state in members (batch
+// conversions run files on several threads).
+std::mutex &openmesh_io_mutex() {
+  static std::mutex m;
+  return m;
 }
 } // namespace
 
 MeshData read_mesh(rust::Str path) {
   silence_openmesh();
+  std::lock_guard<std::mutex> lock(openmesh_io_mutex());
   const std::string file(path);
   PolyMesh mesh;
   mesh.request_vertex_colors();
@@ -118,6 +127,7 @@ MeshData read_mesh(rust::Str path) {
 
 void write_mesh(rust::Str path, const MeshData &data, bool binary) {
   silence_openmesh();
+  std::lock_guard<std::mutex> lock(openmesh_io_mutex());
   TriMesh mesh;
   const bool vcol = !data.vertex_colours.empty();
   if (vcol) mesh.request_vertex_colors();

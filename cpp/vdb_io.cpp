@@ -142,44 +142,48 @@ Vec3fGrid::Ptr vector_grid(const char *name, const LevelData &level, const rust:
 }
 } // namespace
 
-void write_level_file(rust::Str path, const LevelData &level, bool half_floats) {
+void write_level_file(rust::Str path, const LevelData &level, bool half_floats, bool volumes,
+                      bool points) {
   ensure_openvdb();
+  if (!volumes && !points) throw std::invalid_argument("a level file needs volumes or points");
   const size_t n = level.coords.size() / 3;
   if (level.points.size() != 3 * n || level.normals.size() != 3 * n ||
       level.colours.size() != 3 * n || level.mask.size() != n) {
     throw std::invalid_argument("level arrays have inconsistent lengths");
   }
   auto xform = level_transform(level);
-  // Inactive space is "not surface": mask background -1, density background 0.
-  auto mask = FloatGrid::create(-1.f);
-  auto density = FloatGrid::create(0.f);
-  {
-    auto macc = mask->getAccessor();
-    auto dacc = density->getAccessor();
-    for (size_t i = 0; i < n; ++i) {
-      const Coord ijk(level.coords[3 * i], level.coords[3 * i + 1], level.coords[3 * i + 2]);
-      macc.setValue(ijk, level.mask[i]);
-      if (level.mask[i] > 0.f) dacc.setValue(ijk, 1.f);
-    }
-  }
-  mask->setName("mask");
-  mask->setTransform(xform);
-  density->setName("density");
-  density->setGridClass(openvdb::GRID_FOG_VOLUME);
-  density->setTransform(xform);
-
   openvdb::GridPtrVec grids;
-  grids.push_back(mask);
-  grids.push_back(density);
-  grids.push_back(vector_grid("P", level, level.points, openvdb::VEC_CONTRAVARIANT_ABSOLUTE, xform));
-  grids.push_back(vector_grid("N", level, level.normals, openvdb::VEC_COVARIANT_NORMALIZE, xform));
-  grids.push_back(vector_grid("Cd", level, level.colours, openvdb::VEC_INVARIANT, xform));
-  append_points_grid(grids, level, xform, half_floats);
+  if (volumes) {
+    // Inactive space is "not surface": mask background -1, density background 0.
+    auto mask = FloatGrid::create(-1.f);
+    auto density = FloatGrid::create(0.f);
+    {
+      auto macc = mask->getAccessor();
+      auto dacc = density->getAccessor();
+      for (size_t i = 0; i < n; ++i) {
+        const Coord ijk(level.coords[3 * i], level.coords[3 * i + 1], level.coords[3 * i + 2]);
+        macc.setValue(ijk, level.mask[i]);
+        if (level.mask[i] > 0.f) dacc.setValue(ijk, 1.f);
+      }
+    }
+    mask->setName("mask");
+    mask->setTransform(xform);
+    density->setName("density");
+    density->setGridClass(openvdb::GRID_FOG_VOLUME);
+    density->setTransform(xform);
+    grids.push_back(mask);
+    grids.push_back(density);
+    grids.push_back(vector_grid("P", level, level.points, openvdb::VEC_CONTRAVARIANT_ABSOLUTE, xform));
+    grids.push_back(vector_grid("N", level, level.normals, openvdb::VEC_COVARIANT_NORMALIZE, xform));
+    grids.push_back(vector_grid("Cd", level, level.colours, openvdb::VEC_INVARIANT, xform));
+  }
+  if (points) append_points_grid(grids, level, xform, half_floats);
   for (auto &grid : grids) {
     set_meta(*grid, level.meta);
     if (half_floats) grid->setSaveFloatAsHalf(true);
   }
 
+  std::lock_guard<std::mutex> lock(vdb_file_mutex());
   openvdb::io::File file{std::string(path)};
   uint32_t compression = openvdb::io::COMPRESS_ACTIVE_MASK;
   compression |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
@@ -321,6 +325,7 @@ template <typename F> auto read_capped(rust::Str path, F read) -> decltype(read(
   const std::streamoff len = in.tellg();
   if (len < 0) throw std::runtime_error("cannot be read");
   in.close();
+  std::lock_guard<std::mutex> lock(vdb_file_mutex());
   try {
     AllocationCap cap(static_cast<std::size_t>(len));
     check_root_counts(std::string(path));

@@ -7,7 +7,10 @@
 namespace shapeshifter {
 struct LevelData;
 struct GridSummary;
-void write_level_file(rust::Str path, const LevelData &level, bool half_floats);
+// Volumes: the grids mask, density, P, N, Cd; points: the PointDataGrid
+// `points`. Either or both (a points file beside the volumes, or one file).
+void write_level_file(rust::Str path, const LevelData &level, bool half_floats, bool volumes,
+                      bool points);
 LevelData read_level_file(rust::Str path);
 rust::Vec<GridSummary> summarise_vdb_file(rust::Str path);
 }

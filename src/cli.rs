@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-use shapeshifter::encode::{self, EncodeOptions, Pooling};
+use shapeshifter::encode::{EncodeOptions, Pooling};
 use shapeshifter::render::{self, RenderOptions};
 use shapeshifter::config::Config;
 use shapeshifter::sample::{self, SampleOptions};
@@ -35,18 +35,23 @@ pub enum Command {
     /// Describe level files (.vdb: grids, types, voxels, bounds, transform,
     /// metadata) and meshes (counts, bounds, closed/open, colour source).
     ///
-    /// Example: shapeshifter info out/levels/level_4.vdb tower.obj
+    /// Example: shapeshifter info out/levels/level_4.vdb tower.obj --json
     Info {
         #[arg(required = true)]
         files: Vec<PathBuf>,
+        #[command(flatten)]
+        batch: BatchArgs,
     },
-    /// Encode an exemplar mesh into the multiscale feature grids: one level
-    /// file per level (level_0.vdb coarsest) and manifest.json in DIR.
+    /// Encode exemplar meshes into the multiscale feature grids: one level
+    /// file per level (level_0.vdb coarsest) and manifest.json in OUT; with
+    /// several meshes, one folder each in OUT (named after the files).
     ///
     /// Example: shapeshifter encode tower.obj -o out/tower --preview
+    /// Example: shapeshifter encode meshes/*.obj -o out/encoded --json
     Encode {
-        /// The exemplar (.obj with .mtl, .ply, .off, .stl).
-        mesh: PathBuf,
+        /// The exemplars (.obj with .mtl, .ply, .off, .stl).
+        #[arg(required = true)]
+        meshes: Vec<PathBuf>,
         /// Output folder (created).
         #[arg(short, long)]
         output: PathBuf,
@@ -65,8 +70,14 @@ pub enum Command {
         /// Also write level_K.png previews.
         #[arg(long)]
         preview: bool,
+        /// Where each level's PointDataGrid goes: a file of its own beside
+        /// the volumes (level_K.points.vdb), in the level file, or nowhere.
+        #[arg(long, value_enum, default_value_t = vdb::PointsLayout::Separate)]
+        points: vdb::PointsLayout,
         #[command(flatten)]
         view: ViewArgs,
+        #[command(flatten)]
+        batch: BatchArgs,
     },
     /// Edit a level file: delete a box of voxels, or copy one elsewhere
     /// (voxel coordinates as `info` prints them). Writes a new level file;
@@ -101,6 +112,9 @@ pub enum Command {
         /// Write the report as JSON here.
         #[arg(short, long)]
         output: Option<PathBuf>,
+        /// Print the report as JSON on stdout instead of the table.
+        #[arg(long)]
+        json: bool,
     },
     /// Train the hierarchy on an encoded exemplar: per level the upsampler,
     /// then the diffusion model. Levels are independent: `--level K` trains
@@ -195,9 +209,15 @@ pub enum Command {
     /// open). `auto` picks APSS when the exemplar was open. Vertex colours
     /// from the nearest points; output in the exemplar's frame.
     ///
+    /// Several level files: one mesh each in the folder OUT, named after the
+    /// inputs.
+    ///
     /// Example: shapeshifter mesh out/tower/level_4.vdb -o tower.ply --method poisson
+    /// Example: shapeshifter mesh out/tower/variants/*/level_3.vdb -o meshes/
     Mesh {
-        input: PathBuf,
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The mesh file (one input), or the folder for several.
         #[arg(short, long)]
         output: PathBuf,
         #[arg(long, default_value = "auto")]
@@ -205,18 +225,25 @@ pub enum Command {
         /// Contouring grid cells along the longest axis.
         #[arg(long, default_value_t = 512)]
         resolution: u32,
-        /// Also write a PNG preview of the mesh here.
+        /// Also write a PNG preview of the mesh here (one input only).
         #[arg(long)]
         preview: Option<PathBuf>,
+        #[command(flatten)]
+        batch: BatchArgs,
     },
-    /// Write a level file's oriented coloured points as a PLY point cloud
-    /// (x y z nx ny nz red green blue), for tools that want points.
+    /// Write level files' oriented coloured points as PLY point clouds
+    /// (x y z nx ny nz red green blue), for tools that want points; several
+    /// inputs: one cloud each in the folder OUT.
     ///
     /// Example: shapeshifter points out/tower/level_4.vdb -o tower_points.ply
     Points {
-        input: PathBuf,
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The PLY file (one input), or the folder for several.
         #[arg(short, long)]
         output: PathBuf,
+        #[command(flatten)]
+        batch: BatchArgs,
     },
     /// Render a level file's oriented coloured points, or a mesh, to a PNG;
     /// or, given folders of level files (an encoded exemplar, variants, ladder
@@ -407,6 +434,17 @@ pub struct RunArgs {
     pub setup: SetupArgs,
 }
 
+/// Many inputs in one command.
+#[derive(clap::Args, Debug, Clone)]
+pub struct BatchArgs {
+    /// Files worked on at once (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    pub jobs: usize,
+    /// Print what happened to every input as JSON on stdout (for scripts).
+    #[arg(long)]
+    pub json: bool,
+}
+
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum PoolingArg {
     /// Quadric error minimisation: keeps corners and creases sharp.
@@ -560,6 +598,41 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
     Ok(())
 }
 
+/// What `mesh` reports per input.
+#[derive(serde::Serialize)]
+struct MeshedSummary {
+    method: String,
+    vertices: usize,
+    triangles: usize,
+    boundary_edges: usize,
+}
+
+/// Reports a batch: JSON on request; else one line per input (its output, or
+/// its error on stderr) and, for several inputs, a summary. Exit status 1 when
+/// any input failed.
+fn finish_batch<T: serde::Serialize>(
+    report: &shapeshifter::batch::Report<T>,
+    what: &str,
+    folder: Option<&std::path::Path>,
+    json: bool,
+) -> Result<ExitCode> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(report)?);
+    } else {
+        for o in &report.outcomes {
+            match (&o.output, &o.error) {
+                (_, Some(e)) => eprintln!("error: {e}"),
+                (Some(out), None) => println!("{} -> {} ({:.1} s)", o.input.display(), out.display(), o.seconds),
+                (None, None) => {}
+            }
+        }
+        if report.outcomes.len() > 1 {
+            println!("{}", report.summary(what, folder));
+        }
+    }
+    Ok(if report.failed() > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+}
+
 /// One stage of `run` (see [`Command::Stage`]).
 fn run_stage(stage: StageCmd, quiet: bool) -> Result<()> {
     let recorded = |dir: &std::path::Path| pipeline::RunPaths::new(dir).read_config();
@@ -606,20 +679,25 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         tch::set_num_threads(cli.threads);
     }
     match cli.command {
-        Command::Info { files } => {
-            let mut failed = 0;
-            for f in &files {
-                match info::describe(f) {
-                    Ok(text) => print!("{text}"),
-                    Err(e) => {
-                        eprintln!("error: {e}");
-                        failed += 1;
+        Command::Info { files, batch } => {
+            let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+            let report = shapeshifter::batch::run(&files, &names, batch.jobs, |f, _| {
+                info::inspect(f).map(|i| (None, i)).map_err(|e| e.to_string())
+            });
+            if batch.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                for o in &report.outcomes {
+                    match (&o.result, &o.error) {
+                        (Some(i), _) => print!("{}", i.to_text()),
+                        (_, Some(e)) => eprintln!("error: {e}"),
+                        _ => {}
                     }
                 }
             }
-            Ok(if failed > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+            Ok(if report.failed() > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
-        Command::Encode { mesh: mesh_path, output, sampling_resolution, coarsest, finest, pooling, preview, view } => {
+        Command::Encode { meshes, output, sampling_resolution, coarsest, finest, pooling, preview, points, view, batch } => {
             let options = EncodeOptions {
                 sampling_resolution,
                 coarsest_resolution: coarsest,
@@ -631,29 +709,18 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 ..Default::default()
             };
             options.validate().map_err(shapeshifter::Error::from)?;
-            let mesh = mesh::load(&mesh_path)?;
-            let digest = dataset::file_sha256(&mesh_path)?;
-            let (levels, stats) =
-                encode::encode(&mesh, &options).map_err(|e| anyhow::anyhow!("{}: {e}", mesh_path.display()))?;
             let previews = preview.then(|| view.options());
-            let manifest = dataset::write(
-                &output,
-                &mesh,
-                &mesh_path.display().to_string(),
-                &digest,
-                &levels,
-                &options,
-                &stats,
-                previews.as_ref(),
-            )?;
-            log::info!(
-                "encoded {} in {:.2} s: {}",
-                mesh_path.display(),
-                stats.total_s,
-                manifest.levels.iter().map(|l| format!("{}^3: {} voxels", l.resolution, l.voxels)).collect::<Vec<_>>().join(", ")
-            );
-            println!("{}", output.join(dataset::MANIFEST).display());
-            Ok(ExitCode::SUCCESS)
+            let write = vdb::WriteOptions { points, ..Default::default() };
+            let names = shapeshifter::batch::output_names(&meshes)?;
+            let several = meshes.len() > 1;
+            let report = shapeshifter::batch::run(&meshes, &names, batch.jobs, |mesh_path, name| {
+                let dir = if several { output.join(name) } else { output.clone() };
+                let manifest =
+                    pipeline::encode_file(mesh_path, &dir, &options, previews.as_ref(), write).map_err(|e| e.to_string())?;
+                let voxels: Vec<usize> = manifest.levels.iter().map(|l| l.voxels).collect();
+                Ok((Some(dir), voxels))
+            });
+            finish_batch(&report, "encode", several.then_some(output.as_path()), batch.json)
         }
         Command::Edit { input, output, op } => {
             let (mut level, provenance) = vdb::read_level(&input)?;
@@ -674,11 +741,15 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             log::info!("{what}; {} voxels -> {}", level.len(), output.display());
             Ok(ExitCode::SUCCESS)
         }
-        Command::Eval { exemplar, variants, exemplar_mesh, resolution, output } => {
+        Command::Eval { exemplar, variants, exemplar_mesh, resolution, output, json } => {
             let mesh = exemplar_mesh.as_deref().map(mesh::load).transpose()?;
             let files = variants.iter().map(|d| evaluate::read_variant(d)).collect::<Result<Vec<_>, _>>()?;
             let evaluation = evaluate::evaluate(&exemplar, mesh.as_ref(), &files, resolution)?;
-            print!("{}", evaluation.table());
+            if json {
+                println!("{}", serde_json::to_string_pretty(&evaluation)?);
+            } else {
+                print!("{}", evaluation.table());
+            }
             if let Some(out) = output {
                 evaluation.write_json(&out)?;
             }
@@ -745,7 +816,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     config_digest: config.digest(),
                     exemplar_open: manifest.open_surface,
                 };
-                pipeline::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview)?;
+                pipeline::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview, config.output.write_options())?;
             }
             println!("{} variants -> {}", variants.len(), output.display());
             Ok(ExitCode::SUCCESS)
@@ -775,30 +846,54 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             run_one(Source::Demo, &output, &run, quiet, cli.threads)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Mesh { input, output, method, resolution, preview } => {
-            let (level, provenance) = vdb::read_level(&input)?;
+        Command::Mesh { inputs, output, method, resolution, preview, batch } => {
             let method = match method.as_str() {
                 "auto" => None,
                 m => Some(m.parse::<shapeshifter::recon::Method>().map_err(|e| anyhow::anyhow!("--method: {e}"))?),
             };
-            let t = std::time::Instant::now();
-            let (m, used) = pipeline::mesh_level(&level, provenance.exemplar_open, method, resolution)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
-            mesh::save(&m, &output, true)?;
-            if let Some(png) = preview {
-                render::save_png(&render::render_mesh(&m, &pipeline::preview_options())?, &png)?;
+            let several = inputs.len() > 1;
+            if several && preview.is_some() {
+                anyhow::bail!("--preview takes one input (several: run `render` on the meshes)");
             }
-            log::info!(
-                "{used}: {} vertices, {} triangles, {} boundary edges in {:.1} s -> {}",
-                m.positions.len(), m.triangles.len(), m.edge_counts().0, t.elapsed().as_secs_f64(), output.display()
-            );
-            Ok(ExitCode::SUCCESS)
+            let names = shapeshifter::batch::output_names(&inputs)?;
+            let report = shapeshifter::batch::run(&inputs, &names, batch.jobs, |input, name| {
+                let target = if several { output.join(format!("{name}.ply")) } else { output.clone() };
+                let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", input.display());
+                let (level, provenance) = vdb::read_level(input).map_err(|e| e.to_string())?;
+                let (m, used) =
+                    pipeline::mesh_level(&level, provenance.exemplar_open, method, resolution).map_err(|e| fail(&e))?;
+                if several {
+                    std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
+                }
+                mesh::save(&m, &target, true).map_err(|e| e.to_string())?;
+                if let Some(png) = &preview {
+                    let img = render::render_mesh(&m, &pipeline::preview_options()).map_err(|e| fail(&e))?;
+                    render::save_png(&img, png).map_err(|e| e.to_string())?;
+                }
+                let summary = MeshedSummary {
+                    method: used.to_string(),
+                    vertices: m.positions.len(),
+                    triangles: m.triangles.len(),
+                    boundary_edges: m.edge_counts().0,
+                };
+                Ok((Some(target), summary))
+            });
+            finish_batch(&report, "mesh", several.then_some(output.as_path()), batch.json)
         }
-        Command::Points { input, output } => {
-            let (level, _) = vdb::read_level(&input)?;
-            let p = pipeline::oriented_points(&level).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
-            mesh::save_points_ply(&output, &p.positions, &p.normals, &p.colours)?;
-            Ok(ExitCode::SUCCESS)
+        Command::Points { inputs, output, batch } => {
+            let several = inputs.len() > 1;
+            let names = shapeshifter::batch::output_names(&inputs)?;
+            let report = shapeshifter::batch::run(&inputs, &names, batch.jobs, |input, name| {
+                let target = if several { output.join(format!("{name}.ply")) } else { output.clone() };
+                let (level, _) = vdb::read_level(input).map_err(|e| e.to_string())?;
+                let p = pipeline::oriented_points(&level).map_err(|e| format!("{}: {e}", input.display()))?;
+                if several {
+                    std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
+                }
+                mesh::save_points_ply(&target, &p.positions, &p.normals, &p.colours).map_err(|e| e.to_string())?;
+                Ok((Some(target), p.positions.len()))
+            });
+            finish_batch(&report, "points", several.then_some(output.as_path()), batch.json)
         }
         Command::Render { inputs, output, view } => {
             if inputs.iter().any(|p| p.is_dir()) {

@@ -27,6 +27,27 @@ pub struct Config {
     /// existed, hence the default.
     #[serde(default)]
     pub cluster: ClusterConfig,
+    /// How level files are laid out (defaults for configurations recorded
+    /// before the section existed).
+    #[serde(default)]
+    pub output: OutputConfig,
+}
+
+/// Files that leave the program.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Where each level's PointDataGrid goes: "separate" (level_K.points.vdb
+    /// beside level_K.vdb: every client reads the volumes file), "embedded"
+    /// (one file; pyopenvdb's readAll then fails on it) or "none".
+    #[serde(default)]
+    pub points: crate::vdb::PointsLayout,
+}
+
+impl OutputConfig {
+    pub fn write_options(&self) -> crate::vdb::WriteOptions {
+        crate::vdb::WriteOptions { points: self.points, ..Default::default() }
+    }
 }
 
 /// Per-job resources of the cluster job graph, from the measured peaks of
@@ -184,12 +205,17 @@ impl Config {
     /// invalidate trained models, and so on.
     pub fn stage_digest(&self, stage: &str) -> String {
         let part = match stage {
-            "encode" => toml::to_string(&self.encode),
+            // The layout of the files a stage writes is part of what it did.
+            "encode" => [toml::to_string(&self.encode), toml::to_string(&self.output)]
+                .into_iter()
+                .collect::<Result<Vec<_>, _>>()
+                .map(|v| v.join("\n")),
             "sample" => [
                 toml::to_string(&self.encode),
                 toml::to_string(&self.model),
                 toml::to_string(&self.train),
                 toml::to_string(&self.sample),
+                toml::to_string(&self.output),
             ]
             .into_iter()
             .collect::<Result<Vec<_>, _>>()

@@ -97,6 +97,7 @@ pub fn write(
     options: &EncodeOptions,
     stats: &EncodeStats,
     previews: Option<&RenderOptions>,
+    write: WriteOptions,
 ) -> Result<Manifest> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
     let open_surface = !mesh.is_closed();
@@ -104,7 +105,7 @@ pub fn write(
     let mut entries = Vec::new();
     for level in levels {
         let file = level_file_name(level.index);
-        vdb::write_level(&dir.join(&file), level, &provenance, WriteOptions::default())?;
+        vdb::write_level(&dir.join(&file), level, &provenance, write)?;
         if let Some(opts) = previews {
             let img = render::render_level(level, opts)?;
             render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
@@ -192,7 +193,10 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
         for p in entries {
             if p.is_dir() && !p.is_symlink() {
                 walk(&p, out)?;
-            } else if p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with("level_") && n.ends_with(".vdb")) {
+            } else if p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+                // Points files hold the same points as their level file's volumes.
+                n.starts_with("level_") && n.ends_with(".vdb") && !crate::vdb::is_points_file(n)
+            }) {
                 out.push(p);
             }
         }

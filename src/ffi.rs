@@ -142,7 +142,9 @@ pub mod bridge {
         fn write_mesh(path: &str, mesh: &MeshData, binary: bool) -> Result<()>;
 
         include!("shapeshifter/cpp/vdb_io.h");
-        fn write_level_file(path: &str, level: &LevelData, half_floats: bool) -> Result<()>;
+        /// `volumes`: grids mask, density, P, N, Cd; `points`: the PointDataGrid.
+        fn write_level_file(path: &str, level: &LevelData, half_floats: bool, volumes: bool, points: bool)
+            -> Result<()>;
         fn read_level_file(path: &str) -> Result<LevelData>;
         fn summarise_vdb_file(path: &str) -> Result<Vec<GridSummary>>;
 

@@ -5,6 +5,7 @@
 //! Data flows one way: [`mesh`] -> `encode` -> [`level`] -> train -> sample ->
 //! mesh / [`vdb`]. Only [`vdb`] and [`mesh`] (and `recon`) talk to C++.
 
+pub mod batch;
 pub mod cluster;
 pub mod config;
 pub mod dataset;

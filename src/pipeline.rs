@@ -81,6 +81,28 @@ pub fn preview_options() -> RenderOptions {
     RenderOptions { width: 640, height: 640, ..Default::default() }
 }
 
+/// Encodes the mesh file `mesh_path` into `dir` (the `encode` command, one
+/// file of a batch): level files, previews if asked, manifest.json.
+pub fn encode_file(
+    mesh_path: &Path,
+    dir: &Path,
+    options: &EncodeOptions,
+    previews: Option<&RenderOptions>,
+    write: WriteOptions,
+) -> Result<dataset::Manifest> {
+    let mesh = crate::mesh::load(mesh_path)?;
+    let digest = dataset::file_sha256(mesh_path)?;
+    let (levels, stats) = encode::encode(&mesh, options).map_err(|e| Error::file(mesh_path, e.to_string()))?;
+    let source = mesh_path.display().to_string();
+    let manifest = dataset::write(dir, &mesh, &source, &digest, &levels, options, &stats, previews, write)?;
+    log::info!(
+        "encoded {source} in {:.2} s: {}",
+        stats.total_s,
+        manifest.levels.iter().map(|l| format!("{}^3: {} voxels", l.resolution, l.voxels)).collect::<Vec<_>>().join(", ")
+    );
+    Ok(manifest)
+}
+
 /// Encodes `mesh` into `dir` unless already done with the same source and
 /// options. Returns the levels.
 pub fn encode_stage(mesh: &Mesh, source: &str, source_sha: &str, config: &Config, dir: &Path) -> Result<Vec<Level>> {
@@ -92,7 +114,7 @@ pub fn encode_stage(mesh: &Mesh, source: &str, source_sha: &str, config: &Config
     let t = Instant::now();
     let options = encode_options(config);
     let (levels, stats) = encode::encode(mesh, &options)?;
-    dataset::write(dir, mesh, source, source_sha, &levels, &options, &stats, Some(&preview_options()))?;
+    dataset::write(dir, mesh, source, source_sha, &levels, &options, &stats, Some(&preview_options()), config.output.write_options())?;
     log::info!(
         "encode: {} levels in {:.1} s ({})",
         levels.len(),
@@ -363,7 +385,7 @@ pub fn variant_dir(variants_dir: &Path, i: usize) -> PathBuf {
 }
 
 /// Writes one variant's levels (and previews) into its folder.
-pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, previews: bool) -> Result<()> {
+pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, previews: bool, write: WriteOptions) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     // What an earlier sampling left (levels that are now empty, a mesh of
     // other levels) must not be read as part of this variant.
@@ -381,7 +403,7 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
             log::warn!("{}: level {} is empty after pruning", dir.display(), level.index);
             continue;
         }
-        vdb::write_level(&dir.join(dataset::level_file_name(level.index)), level, provenance, WriteOptions::default())?;
+        vdb::write_level(&dir.join(dataset::level_file_name(level.index)), level, provenance, write)?;
         if previews {
             let img = render::render_level(level, &preview_options())?;
             render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
@@ -439,7 +461,7 @@ pub fn sample_stage(
         let one = SampleOptions { first: i, n: 1, ..options.clone() };
         let v = sample::sample(&models, exemplar_levels, &one, None)?;
         let dir = variant_dir(variants_dir, i);
-        write_variant(&dir, &v[0], &provenance, previews)?;
+        write_variant(&dir, &v[0], &provenance, previews, config.output.write_options())?;
         mark_done(&dir, "sample", &digest(&[&common, &i.to_string()]), tv.elapsed().as_secs_f64())?;
     }
     log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
@@ -680,6 +702,9 @@ impl RunPaths {
     pub fn contact_sheet(&self) -> PathBuf {
         self.root.join("contact_sheet.png")
     }
+    pub fn report(&self) -> PathBuf {
+        self.root.join("report.html")
+    }
 
     /// The configuration `stage encode` (or `run`) recorded in the run folder.
     pub fn read_config(&self) -> Result<Config> {
@@ -779,17 +804,72 @@ pub fn run_eval(paths: &RunPaths, n: usize) -> Result<Option<crate::evaluate::Ev
     } else {
         crate::evaluate::evaluate(&paths.exemplar(), None, &files, 256)
     };
-    match evaluation {
+    let evaluation = match evaluation {
         Ok(mut e) => {
             e.unscored.extend(unreadable);
             e.write_json(&paths.eval_json())?;
-            Ok(Some(e))
+            Some(e)
         }
         Err(Error::Invalid(msg)) if msg.starts_with("no variant can be scored") => {
             let _ = std::fs::remove_file(paths.eval_json());
             log::warn!("evaluate: {msg}");
-            Ok(None)
+            None
         }
-        Err(e) => Err(e),
+        Err(e) => return Err(e),
+    };
+    write_report(paths, n, evaluation.as_ref())?;
+    Ok(evaluation)
+}
+
+/// Writes `OUT/report.html` from what the run folder holds: the contact
+/// sheet, `evaluation`'s table, a preview per variant (its mesh, else its
+/// finest level), the loss plots, the seconds each stage recorded, the
+/// configuration.
+pub fn write_report(paths: &RunPaths, n: usize, evaluation: Option<&crate::evaluate::Evaluation>) -> Result<()> {
+    let read = |p: &Path| std::fs::read(p).ok();
+    let seconds = |dir: &Path, stage: &str| -> Option<f64> {
+        let text = std::fs::read_to_string(stamp_path(dir, stage)).ok()?;
+        serde_json::from_str::<Stamp>(&text).ok().map(|s| s.seconds)
+    };
+    let config = paths.read_config()?;
+    let exemplar_name = dataset::read_manifest(&paths.exemplar()).map(|m| m.exemplar).unwrap_or_default();
+    let levels = config.levels();
+    let mut timings = Vec::new();
+    if let Some(t) = seconds(&paths.exemplar(), "encode") {
+        timings.push(("encode".to_string(), t));
     }
+    for k in 0..levels {
+        if let Some(state) = train::read_state(&paths.models(), k) {
+            timings.push((format!("train level {k}"), state.seconds));
+        }
+    }
+    let dirs: Vec<PathBuf> = (0..n).map(|i| variant_dir(&paths.variants(), i)).collect();
+    for stage in ["sample", "mesh"] {
+        let recorded: Vec<f64> = dirs.iter().filter_map(|d| seconds(d, stage)).collect();
+        if !recorded.is_empty() {
+            timings.push((format!("{stage} ({} variants)", recorded.len()), recorded.iter().sum()));
+        }
+    }
+    let variants = dirs
+        .iter()
+        .filter_map(|d| {
+            let name = d.file_name()?.to_string_lossy().into_owned();
+            let finest = (0..levels).rev().map(|k| d.join(format!("level_{k}.png"))).find(|p| p.is_file());
+            let png = read(&d.join("mesh.png")).or_else(|| finest.and_then(|p| read(&p)))?;
+            Some((name, png))
+        })
+        .collect();
+    let inputs = render::report::ReportInputs {
+        title: format!("shapeshifter: {} ({})", exemplar_name, paths.root.display()),
+        contact_sheet: read(&paths.contact_sheet()),
+        eval_table: evaluation.map(|e| e.table()),
+        variants,
+        loss_plots: (0..levels).filter_map(|k| Some((k, read(&train::loss_plot_path(&paths.models(), k))?))).collect(),
+        timings,
+        config_toml: config.to_toml(),
+        config_digest: config.digest(),
+    };
+    let page = render::report::html(&inputs);
+    let path = paths.report();
+    write_atomically(&path, |tmp| std::fs::write(tmp, &page).map_err(|e| Error::file(&path, e.to_string())))
 }

@@ -33,6 +33,7 @@ use crate::level::Level;
 use crate::mesh::{Mesh, MeshColours};
 
 mod contact;
+pub mod report;
 pub use contact::{contact_sheet, SheetOptions};
 
 /// Largest accepted image side, pixels.

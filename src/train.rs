@@ -92,6 +92,11 @@ pub struct TrainState {
     pub note: String,
 }
 
+/// The training state recorded for `level` in `dir`, if one is there and reads.
+pub fn read_state(dir: &Path, level: usize) -> Option<TrainState> {
+    serde_json::from_str(&std::fs::read_to_string(state_path(dir, level)).ok()?).ok()
+}
+
 /// The outcome of [`train_level`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrainReport {

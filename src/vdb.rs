@@ -5,10 +5,16 @@
 //! position), `N`, `Cd`, and the PointDataGrid `points` (P, N, Cd). All share a
 //! linear transform in the exemplar's own frame and units; our metadata is on
 //! every grid under `shapeshifter_*` keys plus `creator`.
+//!
+//! The point grid goes, by default, in a file of its own beside the volumes
+//! (`level_K.points.vdb` beside `level_K.vdb`, [`PointsLayout`]): Debian's
+//! pyopenvdb cannot read a PointDataGrid, and its `readAll` fails on a whole
+//! file that holds one; Houdini opens either file, Blender imports the volumes.
 
 use std::path::Path;
 
 use glam::{DVec3, IVec3, Vec3};
+use serde::{Deserialize, Serialize};
 
 use crate::error::{check_input_file, write_atomically, Error, Result};
 use crate::ffi::bridge::{self, GridSummary, LevelData, MetaEntry};
@@ -27,11 +33,38 @@ pub struct Provenance {
     pub exemplar_open: bool,
 }
 
+/// Where the PointDataGrid `points` of a level goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum PointsLayout {
+    /// In its own file, [`points_path`] of the level file: every client reads
+    /// the volumes file (pyopenvdb's `readAll` included).
+    #[default]
+    Separate,
+    /// In the level file with the volumes (one file per level; pyopenvdb's
+    /// `readAll` then fails on it).
+    Embedded,
+    /// Not written (the volumes hold everything the program reads back).
+    None,
+}
+
 /// Options for writing level files.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct WriteOptions {
     /// Store floats as 16-bit halves: smaller files, lossy (about 1e-3 relative).
     pub half_floats: bool,
+    pub points: PointsLayout,
+}
+
+/// The points file of a level file: `level_3.vdb` -> `level_3.points.vdb`.
+pub fn points_path(level_path: &Path) -> std::path::PathBuf {
+    let stem = level_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    level_path.with_file_name(format!("{stem}.points.vdb"))
+}
+
+/// Whether a file name is a points file written beside a level file.
+pub fn is_points_file(name: &str) -> bool {
+    name.ends_with(".points.vdb")
 }
 
 pub const CREATOR: &str = concat!("shapeshifter ", env!("CARGO_PKG_VERSION"));
@@ -51,7 +84,9 @@ fn world_transform(level: &Level) -> (f64, DVec3) {
     (voxel_size, origin)
 }
 
-/// Writes `level` to `path` atomically (temporary name, then rename).
+/// Writes `level` to `path` atomically (temporary name, then rename), and
+/// its points as `opts.points` says ([`points_path`] for a separate file; a
+/// stale points file from an earlier layout is removed).
 pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: WriteOptions) -> Result<()> {
     let (voxel_size, origin) = world_transform(level);
     let mut meta = vec![
@@ -97,11 +132,22 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
         origin: origin.to_array(),
         meta,
     };
-    write_atomically(path, |tmp| {
-        let tmp_str = tmp.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
-        bridge::write_level_file(tmp_str, &data, opts.half_floats)
-            .map_err(|e| Error::file(path, e.what()))
-    })
+    let write = |target: &Path, volumes: bool, points: bool| {
+        write_atomically(target, |tmp| {
+            let tmp_str = tmp.to_str().ok_or_else(|| Error::file(target, "path is not valid UTF-8"))?;
+            bridge::write_level_file(tmp_str, &data, opts.half_floats, volumes, points)
+                .map_err(|e| Error::file(target, e.what()))
+        })
+    };
+    write(path, true, opts.points == PointsLayout::Embedded)?;
+    let beside = points_path(path);
+    match opts.points {
+        PointsLayout::Separate => write(&beside, false, true),
+        PointsLayout::Embedded | PointsLayout::None => match std::fs::remove_file(&beside) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::file(&beside, e.to_string())),
+            _ => Ok(()),
+        },
+    }
 }
 
 fn find<'a>(meta: &'a [MetaEntry], key: &str) -> Option<&'a MetaEntry> {

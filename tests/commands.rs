@@ -259,3 +259,128 @@ fn slurm_dry_run_writes_the_job_graph_and_stages_fill_one_run_folder() {
     let o = shapeshifter(&["stage", "eval", s, "-n", "4"]);
     assert_clean_failure(&o, "variant_003", "is missing");
 }
+
+#[test]
+fn batch_conversion_isolates_a_corrupt_file_and_names_outputs_after_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let inputs = dir.path().join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    let tower = small_tower_ply(&inputs);
+    let tower_b = inputs.join("tower_b.ply");
+    std::fs::copy(&tower, &tower_b).unwrap();
+    let corrupt = inputs.join("corrupt.ply");
+    std::fs::write(&corrupt, b"ply\nformat binary_little_endian 1.0\nelement vertex 99999999\nend_header\n").unwrap();
+    let enc = dir.path().join("enc");
+    let files = [tower.to_str().unwrap(), corrupt.to_str().unwrap(), tower_b.to_str().unwrap()];
+    let mut args = vec!["encode"];
+    args.extend(files);
+    args.extend(["-o", enc.to_str().unwrap(), "--sampling-resolution", "64", "--finest", "32", "--jobs", "2"]);
+    let o = shapeshifter(&args);
+    assert_eq!(o.status.code(), Some(1), "one bad input fails the batch: {}", stderr(&o));
+    let errors: Vec<String> = stderr(&o).lines().filter(|l| l.starts_with("error")).map(String::from).collect();
+    assert_eq!(errors.len(), 1, "{errors:?}");
+    assert!(errors[0].contains("corrupt.ply"), "{}", errors[0]);
+    assert!(stdout(&o).contains("encode: 2 of 3 done, 1 failed"), "{}", stdout(&o));
+    for name in ["tower", "tower_b"] {
+        let (manifest, _) = dataset::read(&enc.join(name)).unwrap();
+        assert_eq!(manifest.levels.len(), 2);
+    }
+    assert!(!enc.join("corrupt").exists(), "nothing written for the corrupt input");
+
+    // info --json: one outcome per input, in order, the failure as one line.
+    let o = shapeshifter(&["info", "--json", files[0], files[1], files[2]]);
+    assert_eq!(o.status.code(), Some(1));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&o)).expect("info --json prints JSON");
+    let outcomes = report["outcomes"].as_array().unwrap();
+    assert_eq!(outcomes.len(), 3);
+    assert_eq!(outcomes[0]["result"]["kind"], "mesh");
+    assert!(outcomes[0]["result"]["triangles"].as_u64().unwrap() > 100);
+    assert!(outcomes[1]["error"].as_str().unwrap().contains("corrupt.ply"));
+    assert_eq!(outcomes[2]["result"]["vertices"], outcomes[0]["result"]["vertices"]);
+
+    // Level files of the same name in different folders: names from the folders.
+    let bad = dir.path().join("bad.vdb");
+    std::fs::write(&bad, b"not a vdb").unwrap();
+    let levels = [enc.join("tower/level_1.vdb"), bad.clone(), enc.join("tower_b/level_1.vdb")];
+    let level_args: Vec<&str> = levels.iter().map(|p| p.to_str().unwrap()).collect();
+    let meshes = dir.path().join("meshes");
+    let mut args = vec!["mesh"];
+    args.extend(&level_args);
+    args.extend(["-o", meshes.to_str().unwrap(), "--method", "apss", "--resolution", "48", "--json"]);
+    let o = shapeshifter(&args);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&o)).expect("mesh --json prints JSON");
+    assert!(report["outcomes"][1]["error"].as_str().unwrap().contains("bad.vdb"));
+    assert_eq!(listing(&meshes), ["tower_b_level_1.ply", "tower_level_1.ply"]);
+    for name in ["tower_level_1.ply", "tower_b_level_1.ply"] {
+        assert!(mesh::load(&meshes.join(name)).unwrap().triangles.len() > 100);
+    }
+    let points = dir.path().join("points");
+    let mut args = vec!["points"];
+    args.extend(&level_args);
+    args.extend(["-o", points.to_str().unwrap()]);
+    let o = shapeshifter(&args);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(listing(&points), ["tower_b_level_1.ply", "tower_level_1.ply"]);
+    assert!(stdout(&o).contains("points: 2 of 3 done, 1 failed"), "{}", stdout(&o));
+}
+
+#[test]
+fn point_grids_go_beside_the_volumes_unless_asked_and_pyopenvdb_reads_every_level_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = small_tower_ply(dir.path());
+    let grids_of = |file: &Path| -> Vec<(String, u64)> {
+        let o = shapeshifter(&["info", "--json", file.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        v["outcomes"][0]["result"]["grids"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|g| (g["name"].as_str().unwrap().to_string(), g["points"].as_u64().unwrap()))
+            .collect()
+    };
+    let mut files = Vec::new();
+    for layout in ["separate", "embedded", "none"] {
+        let out = dir.path().join(layout);
+        let o = shapeshifter(&[
+            "encode", ply.to_str().unwrap(), "-o", out.to_str().unwrap(), "--sampling-resolution", "64", "--finest", "32",
+            "--points", layout,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let level = out.join("level_1.vdb");
+        let mut names: Vec<String> = grids_of(&level).into_iter().map(|(n, _)| n).collect();
+        names.sort();
+        let volumes = ["Cd", "N", "P", "density", "mask"];
+        let points_file = out.join("level_1.points.vdb");
+        match layout {
+            "separate" => {
+                assert_eq!(names, volumes);
+                let points = grids_of(&points_file);
+                assert_eq!(points.len(), 1);
+                assert_eq!(points[0].0, "points");
+                let (l, _) = vdb::read_level(&level).unwrap();
+                assert_eq!(points[0].1 as usize, l.mask.iter().filter(|&&m| m > 0.0).count(), "one point per surface voxel");
+                files.push(level);
+            }
+            "embedded" => {
+                assert_eq!(names, [&volumes[..], &["points"]].concat(), "sorted names");
+                assert!(!points_file.exists());
+            }
+            _ => {
+                assert_eq!(names, volumes);
+                assert!(!points_file.exists());
+            }
+        }
+    }
+    // The first thing a pipeline script does: readAll on the level file.
+    let python = || std::process::Command::new("/usr/bin/python3");
+    if !matches!(python().args(["-c", "import pyopenvdb"]).output(), Ok(ref o) if o.status.success()) {
+        eprintln!("skipping the pyopenvdb check: Debian's python3-openvdb is not installed (scripts/setup.sh installs it)");
+        return;
+    }
+    let script = "import pyopenvdb as v, sys\ngrids, meta = v.readAll(sys.argv[1])\nprint(sorted(g.name for g in grids))";
+    let o = python().args(["-c", script]).arg(&files[0]).output().unwrap();
+    assert!(o.status.success(), "readAll failed: {}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "['Cd', 'N', 'P', 'density', 'mask']");
+}

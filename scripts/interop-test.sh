@@ -1,0 +1,84 @@
+#!/usr/bin/env bash
+# The files we write, opened by the real clients a pipeline uses (`make interop`;
+# CI runs it after `make test`):
+# - OpenVDB's own vdb_print lists every level file and points file;
+# - Debian's pyopenvdb: readAll and readAllGridMetadata on every level file
+#   (volumes: mask, density, P, N, Cd with their types and the exemplar's
+#   transform); the points files are checked to hold the `points` grid;
+# - Blender (headless): imports every level file as a volume object (grid
+#   names and types, bounds on top of the exemplar mesh), and every mesh we
+#   write (.ply and .glb, vertex colours present);
+# - Chromium (headless): opens report.html, every image decodes; a screenshot.
+# Installs blender, chromium and libopenvdb-tools from Debian when missing.
+set -euo pipefail
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+BIN=$ROOT/target/release/shapeshifter
+OUT=${INTEROP_OUT:-$ROOT/out/interop}
+
+need=()
+command -v blender > /dev/null || need+=(blender)
+command -v chromium > /dev/null || need+=(chromium)
+command -v vdb_print > /dev/null || need+=(libopenvdb-tools)
+/usr/bin/python3 -c "import pyopenvdb" 2> /dev/null || need+=(python3-openvdb)
+if ((${#need[@]})); then
+  echo "interop: installing ${need[*]} (Debian)" >&2
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
+  $SUDO apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q "${need[@]}" > /dev/null
+fi
+[ -x "$BIN" ] || { echo "interop: build first (make build)" >&2; exit 1; }
+[ -x "$ROOT/target/release/examples/demo_exemplar" ] || (cd "$ROOT" && cargo build --release --example demo_exemplar)
+
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+mkdir -p "$OUT"
+
+# A small but complete run: the demo exemplar through 32^3, two variants,
+# meshes light enough for a DCC scene (and a .glb beside each).
+"$ROOT/target/release/examples/demo_exemplar" "$WORK/mesh" > /dev/null
+MESH=$WORK/mesh/demo_tower.ply
+"$BIN" -q run "$MESH" -o "$WORK/run" -n 2 --seed 1 \
+  --set encode.sampling_resolution=128 --set encode.finest_resolution=32 \
+  --set train.level0_iterations=300 --set train.upper_iterations=60 --set train.upsampler_iterations=60 \
+  > "$WORK/run.log"
+LEVELS=$(find "$WORK/run" -name 'level_*.vdb' ! -name '*.points.vdb' | sort)
+POINTS=$(find "$WORK/run" -name 'level_*.points.vdb' | sort)
+# Meshes: the exemplar's finest level (32^3) meshed as PLY and glTF binary.
+"$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.ply"
+"$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.glb"
+MESHES=$(ls "$WORK"/exemplar_level_1.ply "$WORK"/exemplar_level_1.glb; find "$WORK/run/variants" -name 'mesh.*' ! -name '*.png' | sort)
+"$BIN" info --json "$MESH" > "$WORK/mesh_info.json"
+echo "interop: $(wc -w <<< "$LEVELS") level files, $(wc -w <<< "$POINTS") points files, $(wc -w <<< "$MESHES") meshes"
+
+# --- OpenVDB's own tool --------------------------------------------------------
+for f in $LEVELS $POINTS; do
+  vdb_print -l "$f" > "$WORK/vdb_print.txt" || { echo "interop: vdb_print failed on $f" >&2; exit 1; }
+done
+for f in $POINTS; do
+  vdb_print "$f" | grep -q '^points *ptdataidx32' || { echo "interop: $f holds no PointDataGrid 'points'" >&2; exit 1; }
+done
+echo "interop: vdb_print reads every level file and points file; each points file holds the PointDataGrid 'points'"
+echo "interop: vdb_print lists every file; e.g. $(basename "$(dirname "$(echo "$LEVELS" | tail -1)")")/$(basename "$(echo "$LEVELS" | tail -1)"):"
+vdb_print "$(echo "$LEVELS" | tail -1)" | sed 's/^/  vdb_print: /'
+
+# --- pyopenvdb --------------------------------------------------------------------
+/usr/bin/python3 "$ROOT/scripts/interop/pyopenvdb_check.py" "$WORK/mesh_info.json" $LEVELS
+
+# --- Blender ------------------------------------------------------------------------
+blender -b --factory-startup --python-exit-code 1 --python "$ROOT/scripts/interop/blender_check.py" -- \
+  "$WORK/mesh_info.json" $LEVELS -- $MESHES 2> "$WORK/blender.err" | grep '^interop' || {
+  echo "interop: Blender check failed:" >&2; tail -20 "$WORK/blender.err" >&2; exit 1; }
+
+# --- report.html in a real browser ----------------------------------------------
+REPORT=$WORK/run/report.html
+[ -s "$REPORT" ] || { echo "interop: the run wrote no report.html" >&2; exit 1; }
+CHROME=(chromium --headless --no-sandbox --disable-gpu --allow-file-access-from-files --virtual-time-budget=10000)
+"${CHROME[@]}" --dump-dom "file://$REPORT" 2> /dev/null > "$WORK/dom.html"
+loaded=$(sed -n 's/.*data-images-loaded="\([0-9]*\/[0-9]*\)".*/\1/p' "$WORK/dom.html" | head -1)
+[ -n "$loaded" ] || { echo "interop: report.html: the page's image check did not run" >&2; exit 1; }
+k=${loaded%/*}; n=${loaded#*/}
+[ "$n" -gt 0 ] && [ "$k" = "$n" ] || { echo "interop: report.html: only $loaded images loaded" >&2; exit 1; }
+"${CHROME[@]}" --window-size=1280,2400 --screenshot="$OUT/report_screenshot.png" "file://$REPORT" 2> /dev/null
+[ -s "$OUT/report_screenshot.png" ] || { echo "interop: no screenshot" >&2; exit 1; }
+echo "interop: chromium opened report.html: $loaded images loaded; screenshot $OUT/report_screenshot.png"
+echo "interop: all checks passed"
