@@ -131,6 +131,18 @@ pub struct TrainConfig {
     pub upper_t_max: f64,
     /// "code" or "paper".
     pub mixing: String,
+    /// Learning-rate schedule of every phase: linear warm-up over this many
+    /// steps, then cosine decay to `lr_final_ratio` times the rate at the
+    /// phase's last step (0 and 1.0: a constant rate, the paper's).
+    #[serde(default)]
+    pub lr_warmup_steps: usize,
+    #[serde(default = "one")]
+    pub lr_final_ratio: f64,
+    /// Exponential moving average of the diffusion weights, used for
+    /// sampling: per step, ema = decay * ema + (1 - decay) * weights
+    /// (0: none, sampling uses the last weights).
+    #[serde(default)]
+    pub ema_decay: f64,
     pub checkpoint_minutes: f64,
     pub seed: u64,
 }
@@ -265,6 +277,12 @@ impl Config {
             return Err(Error::Invalid("model channels and layers must be at least 1".into()));
         }
         let t = &self.train;
+        if !(t.lr_final_ratio > 0.0 && t.lr_final_ratio <= 1.0) {
+            return Err(Error::Invalid("train.lr_final_ratio must be in (0, 1]".into()));
+        }
+        if !(0.0..1.0).contains(&t.ema_decay) {
+            return Err(Error::Invalid("train.ema_decay must be in [0, 1)".into()));
+        }
         if !(t.upper_t_max > 0.0 && t.upper_t_max <= 1.0) {
             return Err(Error::Invalid("train.upper_t_max must be in (0, 1]".into()));
         }
@@ -279,6 +297,10 @@ impl Config {
         }
         Ok(())
     }
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 fn digest_str(s: &str) -> String {

@@ -33,7 +33,7 @@ use crate::grid::SparseGrid;
 use crate::level::{Level, FEATURE_CHANNELS};
 use crate::nn::{new_diffusion, new_upsampler, sparse_err, DiffusionNet, LevelNet, Upsampler};
 use crate::sparse_conv::SparseTensor;
-use crate::train::{diffusion_checkpoint, mix_seed, upsampler_checkpoint};
+use crate::train::{diffusion_checkpoint, diffusion_ema_checkpoint, mix_seed, upsampler_checkpoint};
 
 /// The trained networks of every level, read from a training folder.
 pub struct Models {
@@ -61,7 +61,8 @@ pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -
     let mut upsamplers = Vec::with_capacity(levels);
     for l in 0..levels {
         let mut d = new_diffusion(&config.model, l, device)?;
-        let p = diffusion_checkpoint(dir, l);
+        // The weights' moving average where training kept one.
+        let p = if config.train.ema_decay > 0.0 { diffusion_ema_checkpoint(dir, l) } else { diffusion_checkpoint(dir, l) };
         if !p.exists() {
             return Err(Error::file(&p, format!("no diffusion checkpoint for level {l}: train it first")));
         }

@@ -45,9 +45,18 @@ use crate::level::{Channel, Level};
 use crate::nn::{mse, new_diffusion, new_upsampler, sparse_err, DiffusionNet, LevelNet, Upsampler};
 use crate::sparse_conv::{flood_blur, upsample_trilinear, SparseTensor};
 
+pub mod optim;
+
+use optim::{lr_at, Ema};
+
 /// Checkpoint of level `level`'s diffusion model in `dir`.
 pub fn diffusion_checkpoint(dir: &Path, level: usize) -> PathBuf {
     dir.join(format!("level_{level}_diffusion.safetensors"))
+}
+/// The moving average of level `level`'s diffusion weights in `dir` (what
+/// sampling uses when `train.ema_decay` > 0).
+pub fn diffusion_ema_checkpoint(dir: &Path, level: usize) -> PathBuf {
+    dir.join(format!("level_{level}_diffusion_ema.safetensors"))
 }
 /// Checkpoint of level `level`'s upsampler in `dir` (levels >= 1).
 pub fn upsampler_checkpoint(dir: &Path, level: usize) -> PathBuf {
@@ -215,6 +224,17 @@ pub fn train_level_with(
         }
     }
 
+    // The weights' moving average, continued from an earlier session's.
+    let ema_path = diffusion_ema_checkpoint(out_dir, level);
+    let ema = std::cell::RefCell::new(if tc.ema_decay > 0.0 {
+        let saved = (state.diffusion_steps > 0 && ema_path.exists()).then_some(ema_path.as_path());
+        Some(Ema::new(&diffusion.vs, tc.ema_decay, saved)?)
+    } else {
+        None
+    });
+    let save_ema = || -> Result<()> { ema.borrow().as_ref().map_or(Ok(()), |e| e.save(&ema_path)) };
+    let lr = |step: usize, total: usize, base: f64| lr_at(step, total, base, tc.lr_warmup_steps, tc.lr_final_ratio);
+
     let mut ckpt = Checkpointer {
         out_dir: out_dir.to_path_buf(),
         level,
@@ -250,8 +270,13 @@ pub fn train_level_with(
             let t_items: Vec<f32> = (0..tc.level0_batch).map(|_| rng.uniform() as f32).collect();
             let t_rows: Vec<f32> = t_items.iter().flat_map(|&t| std::iter::repeat(t).take(n)).collect();
             let t_rows = Tensor::from_slice(&t_rows).to_device(device);
-            diffusion_step(net, &mut opt, &x0, None, &t_rows, 1.0, tc.grad_clip)
-        }, |s| ckpt.maybe(&base, true, s, None, Some(d_ref)))?;
+            opt.set_lr(lr(step, diff_total, tc.lr));
+            let loss = diffusion_step(net, &mut opt, &x0, None, &t_rows, 1.0, tc.grad_clip)?;
+            if let Some(e) = ema.borrow_mut().as_mut() {
+                e.update();
+            }
+            Ok(loss)
+        }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
         diff_now = r.0;
         diff_rate = r.1;
         interrupted |= r.2;
@@ -281,6 +306,7 @@ pub fn train_level_with(
             let base = state.clone();
             let r = phase.run(&mut state.upsampler_steps, &mut state.upsampler_loss, &stop, |step| {
                 tch::manual_seed(mix_seed(tc.seed, level as u64, 1, step as u64) as i64);
+                opt.set_lr(lr(step, tc.upsampler_iterations, tc.upsampler_lr));
                 let pred = net.forward_t(&coarse, true)?;
                 let loss = mse(&pred.feats, &target_f);
                 opt.zero_grad();
@@ -288,7 +314,7 @@ pub fn train_level_with(
                 opt.clip_grad_norm(tc.grad_clip);
                 opt.step();
                 Ok(loss.double_value(&[]))
-            }, |s| ckpt.maybe(&base, false, s, Some(u), None))?;
+            }, |s| ckpt.maybe(&base, false, s, Some(u), None).map(|_| ()))?;
             up_now = r.0;
             up_rate = r.1;
             interrupted |= r.2;
@@ -332,8 +358,13 @@ pub fn train_level_with(
                     Some(Tensor::cat(&blurs.iter().map(|b| &b.feats).collect::<Vec<_>>(), 0))
                 };
                 let t_rows = Tensor::from_slice(&t_rows).to_device(device);
-                diffusion_step(net, &mut opt, &x0, blur.as_ref(), &t_rows, tc.upper_t_max, tc.grad_clip)
-            }, |s| ckpt.maybe(&base, true, s, None, Some(d_ref)))?;
+                opt.set_lr(lr(step, diff_total, tc.lr));
+                let loss = diffusion_step(net, &mut opt, &x0, blur.as_ref(), &t_rows, tc.upper_t_max, tc.grad_clip)?;
+                if let Some(e) = ema.borrow_mut().as_mut() {
+                    e.update();
+                }
+                Ok(loss)
+            }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
             diff_now = r.0;
             diff_rate = r.1;
             interrupted |= r.2;
@@ -345,6 +376,7 @@ pub fn train_level_with(
         && (level == 0 || state.upsampler_steps >= tc.upsampler_iterations);
     state.seconds = seconds_before + t0.elapsed().as_secs_f64();
     ckpt.save(&state, upsampler.as_ref(), Some(&diffusion))?;
+    save_ema()?;
     let plot = loss_plot_path(out_dir, level);
     write_atomically(&plot, |tmp| write_loss_plot(tmp, &state.upsampler_loss, &state.diffusion_loss))?;
 
@@ -510,7 +542,7 @@ struct Checkpointer {
 
 impl Checkpointer {
     /// Periodic checkpoint (every `checkpoint_minutes`) during a phase: `base` is the
-    /// state before the phase, `info` the phase's progress.
+    /// state before the phase, `info` the phase's progress. Whether it wrote one.
     fn maybe(
         &mut self,
         base: &TrainState,
@@ -518,9 +550,9 @@ impl Checkpointer {
         info: &StepInfo,
         u: Option<&LevelNet<Upsampler>>,
         d: Option<&LevelNet<DiffusionNet>>,
-    ) -> Result<()> {
+    ) -> Result<bool> {
         if self.last.elapsed().as_secs_f64() < self.every_s {
-            return Ok(());
+            return Ok(false);
         }
         let mut st = base.clone();
         if diffusion_phase {
@@ -531,7 +563,8 @@ impl Checkpointer {
             st.upsampler_loss = info.losses.to_vec();
         }
         log::debug!("level {}: checkpoint", self.level);
-        self.save(&st, u, d)
+        self.save(&st, u, d)?;
+        Ok(true)
     }
 
     fn save(
