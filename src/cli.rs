@@ -726,7 +726,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let (mut level, provenance) = vdb::read_level(&input)?;
             let what = match op {
                 EditOp::Delete { region } => {
-                    let n = edit::delete_box(&mut level, edit::VoxelBox::parse(&region)?);
+                    let n = edit::delete_box(&mut level, edit::VoxelBox::parse(&region)?)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
                     format!("deleted {n} voxels")
                 }
                 EditOp::Copy { region, to } => {
@@ -795,7 +796,15 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Sample { dir, output, models, n, first, seed, extent, stop_level, from, preview, overrides, device: dev } => {
             let models = models.unwrap_or_else(|| dir.join("models"));
-            let config = Config::read(&models.join("config.toml"))?.with_overrides(&overrides)?;
+            let recorded = models.join("config.toml");
+            if !recorded.is_file() {
+                anyhow::bail!(
+                    "{}: no trained models here (no config.toml): train first (`shapeshifter train {}`), or give --models",
+                    models.display(),
+                    dir.display()
+                );
+            }
+            let config = Config::read(&recorded)?.with_overrides(&overrides)?;
             let device = device(&dev)?;
             let (manifest, levels) = dataset::read(&dir)?;
             let ext = edit::parse_vec3(&extent).ok_or_else(|| anyhow::anyhow!("--extent '{extent}': expected X,Y,Z"))?;

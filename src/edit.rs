@@ -46,12 +46,22 @@ pub fn parse_vec3(text: &str) -> Option<[f32; 3]> {
     (v.len() == 3).then(|| [v[0], v[1], v[2]])
 }
 
-/// Removes the voxels inside `region`; returns how many were removed.
-pub fn delete_box(level: &mut Level, region: VoxelBox) -> usize {
+/// Removes the voxels inside `region`; returns how many were removed. A box
+/// that holds none (outside the grid, or in empty space) is an error: the
+/// user meant to delete something.
+pub fn delete_box(level: &mut Level, region: VoxelBox) -> Result<usize> {
     let before = level.len();
     let coords = level.coords.clone();
     level.retain(|i| !region.contains(coords[i]));
-    before - level.len()
+    match before - level.len() {
+        0 => Err(Error::Invalid(format!(
+            "box {}:{} holds no voxels of this level (its grid is 0..{} on each axis; `info` prints the occupied bounding box)",
+            fmt(region.min),
+            fmt(region.max),
+            level.resolution as i32 - 1
+        ))),
+        n => Ok(n),
+    }
 }
 
 /// Copies the voxels inside `region` so that `region.min` lands on `to`,
@@ -128,10 +138,16 @@ mod tests {
     #[test]
     fn delete_removes_only_inside() {
         let mut l = line_level();
-        let n = delete_box(&mut l, VoxelBox { min: IVec3::new(1, 0, 0), max: IVec3::new(2, 0, 0) });
+        let n = delete_box(&mut l, VoxelBox { min: IVec3::new(1, 0, 0), max: IVec3::new(2, 0, 0) }).unwrap();
         assert_eq!(n, 2);
         assert_eq!(l.coords, vec![IVec3::new(0, 0, 0), IVec3::new(3, 0, 0)]);
         assert_eq!(l.offsets[1], Vec3::new(0.3, 0.0, 0.0));
+        // Outside the grid, or empty space: an error, the level unchanged.
+        for region in [VoxelBox::parse("50,50,50:60,60,60").unwrap(), VoxelBox::parse("1,1,1:2,2,2").unwrap()] {
+            let err = delete_box(&mut l, region).unwrap_err().to_string();
+            assert!(err.contains("holds no voxels"), "{err}");
+            assert_eq!(l.len(), 2);
+        }
     }
 
     #[test]

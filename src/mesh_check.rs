@@ -176,6 +176,16 @@ fn walk_ply_text(body: &[u8], elements: &[(String, u64, Vec<Prop>)]) -> Result<(
             for p in props {
                 let t = tokens.next().ok_or_else(|| short_file(&r.to_string(), *count, name))?;
                 consumed += 1;
+                // OpenMesh reads "nan" or "inf" as a bad token and drops the
+                // faces that use the vertex: the mesh would be reported as
+                // having no faces. Say what is wrong instead.
+                if name == "vertex" && t.iter().any(|b| b.is_ascii_alphabetic()) {
+                    if let Some(v) = std::str::from_utf8(t).ok().and_then(|s| s.parse::<f64>().ok()) {
+                        if !v.is_finite() {
+                            return Err(format!("vertex {r} has a NaN or infinite coordinate ('{}')", String::from_utf8_lossy(t)));
+                        }
+                    }
+                }
                 if let Prop::List(..) = p {
                     let n = std::str::from_utf8(t).ok().and_then(|s| s.parse::<u64>().ok()).ok_or_else(|| {
                         format!("{name} record {r}: list count '{}' is not a number", String::from_utf8_lossy(t))
@@ -299,6 +309,16 @@ fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ply_text_nan_vertices_are_named() {
+        let ply = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\nnan 1 0\n0 0 1\n3 0 1 2\n";
+        let err = check_ply(ply).unwrap_err();
+        assert!(err.contains("vertex 1 has a NaN"), "{err}");
+        let fine = String::from_utf8_lossy(ply).replace("nan", "1e-3");
+        assert!(check_ply(fine.as_bytes()).is_ok());
+    }
 
     #[test]
     fn ply_counts_beyond_the_file_are_errors() {
