@@ -177,6 +177,14 @@ pub struct PoissonOptions {
     pub solver_tolerance: f64,
     /// Conjugate gradient: iteration cap; 0: Eigen's default (2 x unknowns).
     pub solver_max_iterations: u32,
+    /// The points are clustered on a grid of cells this many spacings wide
+    /// and one point per cluster goes to CGAL (the member nearest the
+    /// cluster's mean, with its own normal); <= 1: every point. Colours are
+    /// still taken from every point.
+    pub cluster: f32,
+    /// Steps of APSS projection of the mesh vertices onto every point
+    /// (radius 3 spacings, steps of at most one grid cell); 0: none.
+    pub project_steps: u32,
 }
 
 impl Default for PoissonOptions {
@@ -190,6 +198,8 @@ impl Default for PoissonOptions {
             sm_distance: 0.375,
             solver_tolerance: 1e-6,
             solver_max_iterations: 0,
+            cluster: 1.0,
+            project_steps: 0,
         }
     }
 }
@@ -281,7 +291,14 @@ pub fn poisson_report(
             })
             .collect()
     };
-    let (positions, normals) = (flat(&points.positions, false), flat(&points.normals, true));
+    let (positions, normals) = if options.cluster > 1.0 {
+        let s = if spacing > 0.0 { spacing } else { estimate_spacing(&points.positions) };
+        let keep = cluster_representatives(&points.positions, &points.normals, options.cluster * s);
+        let pick = |v: &[Vec3]| keep.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
+        (flat(&pick(&points.positions), false), flat(&pick(&points.normals), true))
+    } else {
+        (flat(&points.positions, false), flat(&points.normals, true))
+    };
     let mut params = bridge::PoissonParams {
         spacing: spacing as f64,
         sm_angle: options.sm_angle,
@@ -322,6 +339,13 @@ pub fn poisson_report(
     };
     if triangles.is_empty() {
         return Err(ReconError::Failed("the Poisson surface is empty".into()));
+    }
+    let mut mesh_positions = mesh_positions;
+    if options.project_steps > 0 {
+        let s = if spacing > 0.0 { spacing } else { estimate_spacing(&points.positions) };
+        let (lo, hi) = bounds(&points.positions);
+        let cell = ((hi - lo).max_element() / options.resolution as f32).max(s / 4.0);
+        apss::project(&mut mesh_positions, &points.positions, &points.normals, 3.0 * s, 6, cell, options.project_steps);
     }
     let colours = transfer_colours(points, &mesh_positions);
     let s = &stats;
@@ -408,6 +432,31 @@ fn validate(points: &OrientedPoints) -> Result<(), ReconError> {
         return Err(ReconError::NonFinite { index, what: "normal" });
     }
     Ok(())
+}
+
+/// One point per occupied cell of a grid of `cell` (world units): the member
+/// nearest the cell's mean, so that the kept points lie on the surface (a mean
+/// would cut corners). Indices in increasing cell-key order (deterministic).
+fn cluster_representatives(p: &[Vec3], n: &[Vec3], cell: f32) -> Vec<u32> {
+    let (lo, _) = bounds(p);
+    let key = |i: usize| {
+        let c = ((p[i] - lo) / cell).floor().as_ivec3();
+        let a = n[i].abs();
+        let axis = if a.x >= a.y && a.x >= a.z { 0 } else if a.y >= a.z { 1 } else { 2 };
+        let bin = 2 * axis as u64 + (n[i][axis] < 0.0) as u64;
+        (spatial::pack([c.x, c.y, c.z]), bin)
+    };
+    let mut order: Vec<((u64, u64), u32)> = (0..p.len()).map(|i| (key(i), i as u32)).collect();
+    order.sort_unstable();
+    let mut keep = Vec::with_capacity(order.len() / 4);
+    for run in order.chunk_by(|a, b| a.0 == b.0) {
+        let mean = run.iter().map(|&(_, i)| p[i as usize]).sum::<Vec3>() / run.len() as f32;
+        let best = run.iter().min_by(|a, b| {
+            p[a.1 as usize].distance_squared(mean).total_cmp(&p[b.1 as usize].distance_squared(mean))
+        });
+        keep.extend(best.map(|&(_, i)| i));
+    }
+    keep
 }
 
 fn bounds(p: &[Vec3]) -> (Vec3, Vec3) {
