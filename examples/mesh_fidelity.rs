@@ -92,7 +92,7 @@ fn main() -> anyhow::Result<()> {
     let (levels, _) = encode(&exemplar, &options)?;
     let level = levels.last().expect("levels");
     let t = std::time::Instant::now();
-    let (meshed, used) = pipeline::mesh_level(level, !exemplar.is_closed(), method, 2 * finest)?;
+    let (meshed, used) = pipeline::mesh_level(level, !exemplar.is_closed(), method, Some(2 * finest))?;
     let seconds = t.elapsed().as_secs_f64();
     let voxel = (level.voxel_size() / level.frame.scale) as f32;
     let a = surface_samples(&exemplar, 300_000);

@@ -195,8 +195,8 @@ fn main() {
             let (m, r) = poisson_report(&pts, &o).unwrap();
             println!("  {o:?}");
             println!(
-                "  CPU s: setup {:.2}, refine+assemble {:.2}, solve {:.2} ({} CG iterations, error {:.1e}, {} unknowns), mesher/grid {:.2} ({} corners), output {:.2}",
-                r.seconds_setup, r.seconds_refine, r.seconds_solve, r.solver_iterations, r.solver_error,
+                "  {} points to CGAL; CPU s: setup {:.2}, refine+assemble {:.2}, solve {:.2} ({} CG iterations, error {:.1e}, {} unknowns), mesher/grid {:.2} ({} corners), output {:.2}",
+                r.points, r.seconds_setup, r.seconds_refine, r.seconds_solve, r.solver_iterations, r.solver_error,
                 r.delaunay_vertices.saturating_sub(1), r.seconds_mesh, r.grid_corners, r.seconds_output
             );
             m
