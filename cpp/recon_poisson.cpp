@@ -27,7 +27,10 @@
 // iterations of 1e-6 for the same surface), 3. ~1 for CGAL's default criteria
 // (2k vertices) but ~50 for triangles near the spacing (sm_radius 1, 100k
 // vertices); the grid gives 940k vertices at 1/2 spacing in ~3 (2 threads).
-// Steps 1 and 2 are CGAL's own sequential code.
+// Steps 1 and 2 are CGAL's own sequential code and grow with the
+// triangulation (313k vertices for those 149k points, mostly Steiner points
+// around near-duplicates): src/recon.rs therefore hands over points clustered
+// per 1.5 spacings and normal direction (60k, 108k vertices, ~2.6 + 0.3).
 //
 // Units: `spacing` and `grid_cell` in world units; sm_radius and sm_distance
 // in spacings.

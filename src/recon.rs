@@ -305,6 +305,9 @@ pub fn poisson_report(
     }
     let spacing = options.spacing.unwrap_or(points.spacing);
     let spacing = if spacing > 0.0 && spacing.is_finite() { spacing } else { 0.0 };
+    // The spacing the Rust side works with (clusters, grid cell, projection);
+    // CGAL is told 0 (estimate it yourself) when none was given.
+    let s = if spacing > 0.0 { spacing } else { estimate_spacing(&points.positions) };
     let flat = |v: &[Vec3], normalise: bool| -> Vec<f32> {
         v.iter()
             .flat_map(|p| {
@@ -314,7 +317,6 @@ pub fn poisson_report(
             .collect()
     };
     let (positions, normals) = if options.cluster > 1.0 {
-        let s = if spacing > 0.0 { spacing } else { estimate_spacing(&points.positions) };
         let keep = cluster_representatives(&points.positions, &points.normals, options.cluster * s);
         let pick = |v: &[Vec3]| keep.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
         (flat(&pick(&points.positions), false), flat(&pick(&points.normals), true))
@@ -343,7 +345,6 @@ pub fn poisson_report(
                 return Err(ReconError::InvalidOption("Poisson grid resolution must be >= 2".into()));
             }
             let (lo, hi) = bounds(&points.positions);
-            let s = if spacing > 0.0 { spacing } else { estimate_spacing(&points.positions) };
             params.grid_cell = ((hi - lo).max_element() / options.resolution as f32).max(s / 4.0) as f64;
             let grid = bridge::poisson_grid(&positions, &normals, &params).map_err(failed)?;
             let t = Instant::now();
@@ -364,7 +365,6 @@ pub fn poisson_report(
     }
     let mut mesh_positions = mesh_positions;
     if options.project_steps > 0 {
-        let s = if spacing > 0.0 { spacing } else { estimate_spacing(&points.positions) };
         apss::project(&mut mesh_positions, &points.positions, &points.normals, 3.0 * s, 6, s, options.project_steps);
     }
     let colours = transfer_colours(points, &mesh_positions);
@@ -455,11 +455,16 @@ fn validate(points: &OrientedPoints) -> Result<(), ReconError> {
     Ok(())
 }
 
-/// One point per occupied cell of a grid of `cell` (world units): the member
-/// nearest the cell's mean, so that the kept points lie on the surface (a mean
-/// would cut corners). Indices in increasing cell-key order (deterministic).
+/// One point per occupied pair of grid cell (`cell`, world units) and normal
+/// direction (dominant axis and its sign): the member nearest the cluster's
+/// mean, so that the kept points lie on the surface (a mean would cut
+/// corners). Indices in increasing key order (deterministic). Every point
+/// where the grid would be too fine for [`spatial::pack`]'s keys.
 fn cluster_representatives(p: &[Vec3], n: &[Vec3], cell: f32) -> Vec<u32> {
-    let (lo, _) = bounds(p);
+    let (lo, hi) = bounds(p);
+    if !((hi - lo).max_element() / cell < spatial::KEY_LIMIT as f32) {
+        return (0..p.len() as u32).collect();
+    }
     let key = |i: usize| {
         let c = ((p[i] - lo) / cell).floor().as_ivec3();
         let a = n[i].abs();
