@@ -6,7 +6,7 @@
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup build demo test bench fuzz clean cluster-test interop
+.PHONY: setup build demo test bench bench-poisson fuzz clean cluster-test interop
 
 setup:
 	@bash scripts/setup.sh
@@ -52,3 +52,9 @@ fuzz: build
 
 clean:
 	cargo clean
+
+# Our Poisson meshing against Open3D's screened Poisson (depth 9) on the
+# ruined tower's 256^3 level, side by side in one run (README, Performance);
+# installs Open3D from PyPI into a cache folder outside the work tree.
+bench-poisson: build
+	bash scripts/poisson-vs-open3d.sh

@@ -27,7 +27,10 @@
 // iterations of 1e-6 for the same surface), 3. ~1 for CGAL's default criteria
 // (2k vertices) but ~50 for triangles near the spacing (sm_radius 1, 100k
 // vertices); the grid gives 940k vertices at 1/2 spacing in ~3 (2 threads).
-// Steps 1 and 2 are CGAL's own sequential code.
+// Steps 1 and 2 are CGAL's own sequential code and grow with the
+// triangulation (313k vertices for those 149k points, mostly Steiner points
+// around near-duplicates): src/recon.rs therefore hands over points clustered
+// per 1.5 spacings and normal direction (60k, 108k vertices, ~2.6 + 0.3).
 //
 // Units: `spacing` and `grid_cell` in world units; sm_radius and sm_distance
 // in spacings.
@@ -375,17 +378,32 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
            y >= domain[4] || z >= domain[5];
   };
   std::vector<std::array<int, 6>> boxes;  // corner ranges, inclusive
-  // Two layers along every face: the face (held outside) and the one inside
-  // it, so that the cap's cells have all their corners.
-  for (int a = 0; a < 3; ++a)
-    for (int side = 0; side < 2; ++side) {
-      std::array<int, 6> box;
-      std::copy(domain, domain + 6, box.begin());
-      if (side == 0) box[3 + a] = domain[a] + 1;
-      else box[a] = domain[3 + a] - 1;
-      boxes.push_back(box);
+  // Corner range of a world-space box, one cell to spare below and two above
+  // (the cells around every corner in it), clipped to the domain; false if
+  // nothing is left.
+  auto corner_box = [&](const double mn[3], const double mx[3], std::array<int, 6> &box) {
+    for (int a = 0; a < 3; ++a) {
+      box[a] = std::max(int(std::floor((mn[a] - origin[a]) / cell)) - 1, domain[a]);
+      box[3 + a] = std::min(int(std::floor((mx[a] - origin[a]) / cell)) + 2, domain[3 + a]);
     }
-  const std::size_t face_boxes = boxes.size();
+    return box[0] <= box[3] && box[1] <= box[4] && box[2] <= box[5];
+  };
+  // The cap needs two layers along every face: the face (held outside) and
+  // the one inside it. A corner there can be negative only in a tetrahedron
+  // with a negative vertex, so the layers are marked only where such a
+  // tetrahedron's box meets them. A closed shape's inside stays far from the
+  // faces and marks none (at 512 cells, full layers were ~3M corners, a third
+  // of the grid).
+  auto add_face_layers = [&](const std::array<int, 6> &box) {
+    for (int a = 0; a < 3; ++a)
+      for (int side = 0; side < 2; ++side) {
+        std::array<int, 6> layer = box;
+        if (side == 0) layer[3 + a] = std::min(box[3 + a], domain[a] + 1);
+        else layer[a] = std::max(box[a], domain[3 + a] - 1);
+        if (layer[a] <= layer[3 + a]) boxes.push_back(layer);
+      }
+  };
+  std::size_t crossings = 0;
   for (auto c = tr.finite_cells_begin(); c != tr.finite_cells_end(); ++c) {
     double f[4];
     bool neg = false, pos = false;
@@ -394,8 +412,20 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
       neg |= f[i] < 0.0;
       pos |= f[i] >= 0.0;
     }
-    if (!(neg && pos)) continue;
+    if (!neg) continue;
     double mn[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, mx[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 3; ++k) {
+        mn[k] = std::min(mn[k], c->vertex(i)->point()[k]);
+        mx[k] = std::max(mx[k], c->vertex(i)->point()[k]);
+      }
+    std::array<int, 6> box;
+    if (corner_box(mn, mx, box)) add_face_layers(box);
+    if (!pos) continue;
+    for (int k = 0; k < 3; ++k) {
+      mn[k] = HUGE_VAL;
+      mx[k] = -HUGE_VAL;
+    }
     for (int i = 0; i < 4; ++i)
       for (int j = i + 1; j < 4; ++j) {
         if ((f[i] < 0.0) == (f[j] < 0.0)) continue;
@@ -407,17 +437,11 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
           mx[k] = std::max(mx[k], x);
         }
       }
-    std::array<int, 6> box;
-    for (int a = 0; a < 3; ++a) {
-      box[a] = int(std::floor((mn[a] - origin[a]) / cell)) - 1;
-      box[3 + a] = int(std::floor((mx[a] - origin[a]) / cell)) + 2;
-      box[a] = std::max(box[a], domain[a]);
-      box[3 + a] = std::min(box[3 + a], domain[3 + a]);
-    }
-    if (box[0] > box[3] || box[1] > box[4] || box[2] > box[5]) continue;
+    if (!corner_box(mn, mx, box)) continue;
     boxes.push_back(box);
+    ++crossings;
   }
-  if (boxes.size() == face_boxes) throw std::runtime_error("poisson: the implicit function has no zero set");
+  if (crossings == 0) throw std::runtime_error("poisson: the implicit function has no zero set");
   std::vector<uint64_t> keys;
   for (const auto &box : boxes)
     for (int x = floor_div(box[0], kBrick); x <= floor_div(box[3], kBrick); ++x)

@@ -6,9 +6,13 @@
 //!
 //!   cargo run --release --example recon_bench [-- METHOD [key=value ...]]
 //!   cargo run --release --example recon_bench -- all mesh=../shared/data/towerruins/towerruins.obj
+//!   cargo run --release --example recon_bench -- poisson level=out/tower/level_4.vdb out=tower.ply
+//!
+//! `level=PATH` meshes the points of a level file (as `shapeshifter mesh` does);
+//! `out=PATH` also writes the mesh (PLY with vertex colours, exemplar frame).
 //!
 //! METHOD: all (default), poisson, apss.
-//! Keys: res=256 (sampling), mesher=cgal, sm_distance= sm_radius= sm_angle= tol=,
+//! Keys: res=256 (sampling), mesher=cgal, sm_distance= sm_radius= sm_angle= tol= cluster=,
 //! resolution= (both), radius= band= (APSS).
 
 use glam::Vec3;
@@ -142,21 +146,26 @@ fn main() {
     }
     let res = get("res").unwrap_or(256.0) as i32;
     let exemplar = args.iter().find_map(|a| a.strip_prefix("mesh="));
+    let level = args.iter().find_map(|a| a.strip_prefix("level="));
     let t = Instant::now();
-    let pts = match exemplar {
-        Some(path) => {
+    let pts = match (exemplar, level) {
+        (_, Some(path)) => {
+            let (level, _) = shapeshifter::vdb::read_level(std::path::Path::new(path)).expect("read level=PATH");
+            shapeshifter::pipeline::oriented_points(&level).expect("active voxels")
+        }
+        (Some(path), None) => {
             let m = shapeshifter::mesh::load(std::path::Path::new(path)).expect("load mesh=PATH");
             let (levels, _) = shapeshifter::encode::encode(&m, &Default::default()).expect("encode");
             shapeshifter::pipeline::oriented_points(levels.last().expect("levels")).expect("active voxels")
         }
-        None => sample(res),
+        (None, None) => sample(res),
     };
     let vs = pts.spacing;
     println!(
         "{method}: {} points (one per voxel at {}^3 of {}), made in {:.2} s, {} rayon threads",
         pts.positions.len(),
-        if exemplar.is_some() { 256 } else { res },
-        exemplar.unwrap_or("the procedural shape"),
+        if exemplar.is_some() || level.is_some() { 256 } else { res },
+        level.or(exemplar).unwrap_or("the procedural shape"),
         t.elapsed().as_secs_f64(),
         rayon::current_num_threads()
     );
@@ -178,14 +187,16 @@ fn main() {
             o.sm_angle = get("sm_angle").unwrap_or(o.sm_angle);
             o.solver_tolerance = get("tol").unwrap_or(o.solver_tolerance);
             o.resolution = get("resolution").map_or(o.resolution, |v| v as u32);
+            o.cluster = get("cluster").map_or(o.cluster, |v| v as f32);
+            o.project_steps = get("project").map_or(o.project_steps, |v| v as u32);
             if args.iter().any(|a| a == "mesher=cgal") {
                 o.mesher = shapeshifter::recon::PoissonMesher::Cgal;
             }
             let (m, r) = poisson_report(&pts, &o).unwrap();
             println!("  {o:?}");
             println!(
-                "  CPU s: setup {:.2}, refine+assemble {:.2}, solve {:.2} ({} CG iterations, error {:.1e}, {} unknowns), mesher/grid {:.2} ({} corners), output {:.2}",
-                r.seconds_setup, r.seconds_refine, r.seconds_solve, r.solver_iterations, r.solver_error,
+                "  {} points to CGAL; CPU s: setup {:.2}, refine+assemble {:.2}, solve {:.2} ({} CG iterations, error {:.1e}, {} unknowns), mesher/grid {:.2} ({} corners), output {:.2}",
+                r.points, r.seconds_setup, r.seconds_refine, r.seconds_solve, r.solver_iterations, r.solver_error,
                 r.delaunay_vertices.saturating_sub(1), r.seconds_mesh, r.grid_corners, r.seconds_output
             );
             m
@@ -195,7 +206,7 @@ fn main() {
     let secs = t.elapsed().as_secs_f64();
     let cpu = cpu_seconds() - cpu0;
     // Accuracy against the exact surface: only the procedural shape has one.
-    let accuracy = match exemplar {
+    let accuracy = match exemplar.or(level) {
         Some(_) => String::new(),
         None => {
             let (mean, max) = accuracy(&mesh, vs);
@@ -212,4 +223,14 @@ fn main() {
         peak_rss_mib(),
         rss0
     );
+    if let Some(out) = args.iter().find_map(|a| a.strip_prefix("out=")) {
+        let m = shapeshifter::mesh::Mesh {
+            name: method.clone(),
+            positions: mesh.positions,
+            triangles: mesh.triangles,
+            colours: shapeshifter::mesh::MeshColours::PerVertex(mesh.colours),
+            texture: None,
+        };
+        shapeshifter::mesh::save(&m, std::path::Path::new(out), true).expect("write out=PATH");
+    }
 }

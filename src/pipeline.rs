@@ -493,19 +493,21 @@ pub fn oriented_points(level: &Level) -> Result<crate::recon::OrientedPoints> {
 }
 
 /// Meshes a level: Poisson for closed exemplars, APSS for open ones unless
-/// `method` says otherwise. `resolution`: contouring grid along the longest
-/// axis.
+/// `method` says otherwise. `resolution`: contouring grid cells along the
+/// longest axis; None: the method's default (Poisson 256, APSS 512).
 pub fn mesh_level(
     level: &Level,
     exemplar_open: bool,
     method: Option<crate::recon::Method>,
-    resolution: u32,
+    resolution: Option<u32>,
 ) -> Result<(Mesh, crate::recon::Method)> {
     use crate::recon::{self, ApssOptions, Method, PoissonOptions};
     let method = method.unwrap_or(if exemplar_open { Method::Apss } else { Method::Poisson });
     let points = oriented_points(level)?;
-    let poisson = PoissonOptions { resolution, ..Default::default() };
-    let apss = ApssOptions { resolution, ..Default::default() };
+    let (mut poisson, mut apss) = (PoissonOptions::default(), ApssOptions::default());
+    if let Some(resolution) = resolution {
+        (poisson.resolution, apss.resolution) = (resolution, resolution);
+    }
     let m = recon::reconstruct(&points, method, &poisson, &apss).map_err(|e| Error::Invalid(e.to_string()))?;
     let mesh = Mesh {
         name: "mesh".into(),
@@ -548,7 +550,7 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
                 continue;
             }
         };
-        match mesh_level(&finest, exemplar_open, None, resolution) {
+        match mesh_level(&finest, exemplar_open, None, Some(resolution)) {
             Ok((mesh, _)) => {
                 crate::mesh::save(&mesh, &out, true)?;
                 let img = render::render_mesh(&mesh, &preview_options())?;

@@ -209,6 +209,38 @@ vdb.write(sys.argv[2], grids=grids)
     assert!(mesh::load(&out).unwrap().triangles.len() > 100);
 }
 
+/// `--depth N` is `--resolution 2^N` (same bytes, deterministic), one depth
+/// less is about a quarter of the vertices (surface area over cell area),
+/// and the two flags together are refused.
+#[test]
+fn mesh_depth_is_a_grid_of_two_to_the_depth() {
+    use shapeshifter::vdb::{write_level, Provenance, WriteOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let level = dir.path().join("sphere.vdb");
+    write_level(&level, &sphere_level(2000), &Provenance::default(), WriteOptions::default()).unwrap();
+    let mesh_with = |name: &str, args: &[&str]| {
+        let out = dir.path().join(name);
+        let mut all = vec!["mesh", level.to_str().unwrap(), "-o", out.to_str().unwrap(), "--method", "poisson"];
+        all.extend_from_slice(args);
+        let o = shapeshifter(&all);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        out
+    };
+    let d6 = mesh_with("d6.ply", &["--depth", "6"]);
+    let r64 = mesh_with("r64.ply", &["--resolution", "64"]);
+    assert_eq!(std::fs::read(&d6).unwrap(), std::fs::read(&r64).unwrap(), "--depth 6 differs from --resolution 64");
+    let d5 = mesh_with("d5.ply", &["--depth", "5"]);
+    let (v6, v5) = (mesh::load(&d6).unwrap().positions.len(), mesh::load(&d5).unwrap().positions.len());
+    let ratio = v6 as f64 / v5 as f64;
+    assert!((3.0..5.0).contains(&ratio), "depth 6: {v6} vertices, depth 5: {v5} (ratio {ratio:.2}, expected ~4)");
+    let out = dir.path().join("both.ply");
+    let o = shapeshifter(&[
+        "mesh", level.to_str().unwrap(), "-o", out.to_str().unwrap(), "--depth", "6", "--resolution", "64",
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    assert!(!out.exists());
+}
+
 #[test]
 fn slurm_dry_run_writes_the_job_graph_and_stages_fill_one_run_folder() {
     let dir = tempfile::tempdir().unwrap();

@@ -33,11 +33,12 @@ pub(crate) struct ApssParams {
 }
 
 
-/// One fit at `x` from the candidate points `cand` (those near x's brick):
-/// the signed algebraic distance, or None where too few points support it.
+/// One fit at `x` from the candidate points `cand` (those near x): the signed
+/// algebraic distance (world units) and the sphere's unit gradient at x, or
+/// None where fewer than `min_neighbours` points lie within `radius`.
 #[inline]
-fn apss_value(cand: &[(Vec3, Vec3)], x: Vec3, p: &ApssParams) -> Option<f32> {
-    let h = p.radius;
+fn apss_fit(cand: &[(Vec3, Vec3)], x: Vec3, radius: f32, min_neighbours: u32) -> Option<(f32, Vec3)> {
+    let h = radius;
     let inv_h = 1.0 / h as f64;
     let (mut sw, mut sdpn, mut sdpp) = (0.0f64, 0.0f64, 0.0f64);
     let (mut sp, mut sn) = (DVec3::ZERO, DVec3::ZERO);
@@ -59,7 +60,7 @@ fn apss_value(cand: &[(Vec3, Vec3)], x: Vec3, p: &ApssParams) -> Option<f32> {
         sdpp += w * q.dot(q);
         count += 1;
     }
-    if count < p.min_neighbours || sw <= 0.0 {
+    if count < min_neighbours || sw <= 0.0 {
         return None;
     }
     let inv_w = 1.0 / sw;
@@ -72,8 +73,41 @@ fn apss_value(cand: &[(Vec3, Vec3)], x: Vec3, p: &ApssParams) -> Option<f32> {
     if !(norm2 > 1e-12) {
         return None;
     }
+    // s(0) = uc and grad s(0) = ul in x's scaled frame.
     let v = (uc / norm2.sqrt() * h as f64) as f32;
-    v.is_finite().then_some(v)
+    let g = ul.normalize_or_zero().as_vec3();
+    (v.is_finite() && g != Vec3::ZERO).then_some((v, g))
+}
+
+#[inline]
+fn apss_value(cand: &[(Vec3, Vec3)], x: Vec3, p: &ApssParams) -> Option<f32> {
+    apss_fit(cand, x, p.radius, p.min_neighbours).map(|(v, _)| v)
+}
+
+/// Moves every vertex onto the APSS surface of the points (Guennebaud & Gross
+/// 2007's projection: fit at the vertex, step along the fit's gradient by its
+/// signed distance, `steps` times). A step longer than `max_step` (world
+/// units) is shortened to it, and a vertex with fewer than `min_neighbours`
+/// points within `radius` (a hole the caller filled) stays where it is.
+pub(crate) fn project(
+    vertices: &mut [Vec3],
+    points: &[Vec3],
+    normals: &[Vec3],
+    radius: f32,
+    min_neighbours: u32,
+    max_step: f32,
+    steps: u32,
+) {
+    let grid = HashGrid::new(points, radius);
+    let normals: Vec<Vec3> = grid.index.iter().map(|&i| normals[i as usize].normalize_or_zero()).collect();
+    vertices.par_iter_mut().for_each_init(Vec::new, |cand, v| {
+        for _ in 0..steps {
+            cand.clear();
+            grid.for_each_within(*v, radius, |j, _| cand.push((grid.pos[j], normals[j])));
+            let Some((d, g)) = apss_fit(cand, *v, radius, min_neighbours) else { return };
+            *v -= g * d.clamp(-max_step, max_step);
+        }
+    });
 }
 
 /// Steps 1 and 2: the APSS field on the bricks near the points.

@@ -261,3 +261,46 @@ fn poisson_closes_an_open_patch_within_its_margin() {
     let cov = coverage(&pts, &m);
     assert!(cov < 1.5 * VS, "an input point is {} spacings from the mesh", cov / VS);
 }
+
+/// Two sides of a sheet half a spacing thick, with opposite normals, share
+/// every cluster cell: clustering by cell alone would merge them into one
+/// side; by cell and normal direction both stay, each thinned.
+#[test]
+fn clustering_keeps_both_sides_of_a_thin_sheet() {
+    let (mut p, mut n) = (Vec::new(), Vec::new());
+    for i in 0..40 {
+        for j in 0..40 {
+            for (z, nz) in [(0.0, -1.0), (0.5 * VS, 1.0)] {
+                p.push(Vec3::new(i as f32 * VS, j as f32 * VS, z));
+                n.push(Vec3::new(0.0, 0.0, nz));
+            }
+        }
+    }
+    let keep = cluster_representatives(&p, &n, 2.0 * VS);
+    let up = keep.iter().filter(|&&i| n[i as usize].z > 0.0).count();
+    let down = keep.len() - up;
+    // 40 points per side and axis in cells of 2 spacings: 20 x 20 per side.
+    assert_eq!((up, down), (400, 400));
+    assert!(keep.windows(2).all(|w| w[0] != w[1]));
+}
+
+/// Fewer points for CGAL cost accuracy that the projection onto all the
+/// points brings back (a sphere is exactly what an APSS fit represents).
+#[test]
+fn projection_brings_clustered_poisson_onto_the_sphere() {
+    let pts = sphere();
+    let off = |m: &ReconMesh| m.positions.iter().map(|p| (p.length() - R).abs() / VS).fold(0.0, f32::max);
+    let coarse = PoissonOptions { cluster: 2.0, project_steps: 0, ..Default::default() };
+    let (raw, report) = poisson_report(&pts, &coarse).unwrap();
+    assert!(
+        (report.points as usize) < pts.positions.len() / 2,
+        "clustering per 2 spacings kept {} of {} points",
+        report.points,
+        pts.positions.len()
+    );
+    let projected = poisson(&pts, &PoissonOptions { project_steps: 2, ..coarse }).unwrap();
+    assert_eq!(projected.triangles, raw.triangles, "projection moves vertices only");
+    let (before, after) = (off(&raw), off(&projected));
+    assert!(after < 0.05 && after < 0.5 * before, "worst vertex {before} -> {after} spacings off the sphere");
+    check_sphere(&projected, &pts, "poisson (clustered, projected)");
+}
