@@ -39,8 +39,8 @@ unsigned char to_byte(float c) {
   const float v = c < 0.f ? 0.f : (c > 1.f ? 1.f : c);
   return static_cast<unsigned char>(v * 255.f + 0.5f);
 }
+} // namespace
 
-// OpenMesh reports problems on its own streams; we report them ourselves.
 void silence_openmesh() {
   static bool done = false;
   if (!done) {
@@ -50,7 +50,6 @@ void silence_openmesh() {
     done = true;
   }
 }
-} // namespace
 
 MeshData read_mesh(rust::Str path) {
   silence_openmesh();

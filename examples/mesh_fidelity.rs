@@ -5,42 +5,8 @@
 //!
 //! Usage: mesh_fidelity MESH [poisson|apss|auto] [FINEST] [SAMPLING]
 
-use glam::Vec3;
 use shapeshifter::encode::{encode, EncodeOptions};
 use shapeshifter::{mesh, metrics, pipeline, recon};
-
-/// `n` points spread over the triangles by area (deterministic).
-fn surface_samples(m: &mesh::Mesh, n: usize) -> Vec<Vec3> {
-    let areas: Vec<f32> = m
-        .triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| m.positions[i as usize]);
-            0.5 * (b - a).cross(c - a).length()
-        })
-        .collect();
-    let total: f32 = areas.iter().sum();
-    let mut out = Vec::with_capacity(n);
-    let mut state = 0x2545F4914F6CDD1Du64;
-    let mut rnd = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
-    for (t, area) in m.triangles.iter().zip(&areas) {
-        let k = (area / total * n as f32).round() as usize;
-        let [a, b, c] = t.map(|i| m.positions[i as usize]);
-        for _ in 0..k.max(1) {
-            let (mut u, mut v) = (rnd(), rnd());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            out.push(a + (b - a) * u + (c - a) * v);
-        }
-    }
-    out
-}
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -59,8 +25,8 @@ fn main() -> anyhow::Result<()> {
     let (meshed, used) = pipeline::mesh_level(level, !exemplar.is_closed(), method, 2 * finest)?;
     let seconds = t.elapsed().as_secs_f64();
     let voxel = (level.voxel_size() / level.frame.scale) as f32;
-    let a = surface_samples(&exemplar, 300_000);
-    let b = surface_samples(&meshed, 300_000);
+    let a = exemplar.surface_samples(300_000);
+    let b = meshed.surface_samples(300_000);
     let chamfer = metrics::chamfer(&a, &b) / voxel;
     let hausdorff = metrics::hausdorff(&a, &b) / voxel;
     println!(

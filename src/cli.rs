@@ -193,13 +193,20 @@ pub enum Command {
     /// Mesh a level file's oriented coloured points: Poisson (CGAL; closed
     /// shapes) or APSS (algebraic point set surfaces; open surfaces stay
     /// open). `auto` picks APSS when the exemplar was open. Vertex colours
-    /// from the nearest points; output in the exemplar's frame.
+    /// from the nearest points; output in the exemplar's frame, as PLY or
+    /// glTF binary (.glb), both with vertex colours. --faces makes a light
+    /// mesh: quadric decimation that keeps colours and sharp edges.
     ///
     /// Example: shapeshifter mesh out/tower/level_4.vdb -o tower.ply --method poisson
+    /// Example: shapeshifter mesh out/tower/level_4.vdb -o tower.glb --faces 100000
     Mesh {
         input: PathBuf,
+        /// The mesh file: .ply or .glb.
         #[arg(short, long)]
         output: PathBuf,
+        /// Decimate to at most this many triangles (0: keep every triangle).
+        #[arg(long, default_value_t = 0)]
+        faces: usize,
         #[arg(long, default_value = "auto")]
         method: String,
         /// Contouring grid cells along the longest axis.
@@ -539,7 +546,7 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
             c
         })?;
     }
-    let meshed = pipeline::run_mesh(&paths, 0..args.n)?;
+    let meshed = pipeline::run_mesh(&paths, 0..args.n, &config.mesh)?;
     log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
     times.push(("mesh", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
@@ -589,7 +596,8 @@ fn run_stage(stage: StageCmd, quiet: bool) -> Result<()> {
             println!("{} variants ({}..{}) -> {}", dirs.len(), first, first + n, dir.join("variants").display());
         }
         StageCmd::Mesh { dir, first, n } => {
-            let done = pipeline::run_mesh(&pipeline::RunPaths::new(&dir), first..first + n)?;
+            let config = recorded(&dir)?;
+            let done = pipeline::run_mesh(&pipeline::RunPaths::new(&dir), first..first + n, &config.mesh)?;
             println!("{done} variants meshed");
         }
         StageCmd::Eval { dir, n } => match pipeline::run_eval(&pipeline::RunPaths::new(&dir), n)? {
@@ -775,7 +783,12 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             run_one(Source::Demo, &output, &run, quiet, cli.threads)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Mesh { input, output, method, resolution, preview } => {
+        Command::Mesh { input, output, method, resolution, faces, preview } => {
+            // Refuse a format that would drop the colours before the work.
+            let ext = output.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+            if !mesh::COLOUR_EXTENSIONS.contains(&ext.as_str()) {
+                anyhow::bail!("{}: mesh writes .ply or .glb (vertex colours), not '.{ext}'", output.display());
+            }
             let (level, provenance) = vdb::read_level(&input)?;
             let method = match method.as_str() {
                 "auto" => None,
@@ -784,6 +797,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let t = std::time::Instant::now();
             let (m, used) = pipeline::mesh_level(&level, provenance.exemplar_open, method, resolution)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
+            let m = pipeline::light_mesh(m, faces)?;
             mesh::save(&m, &output, true)?;
             if let Some(png) = preview {
                 render::save_png(&render::render_mesh(&m, &pipeline::preview_options())?, &png)?;

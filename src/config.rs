@@ -27,6 +27,21 @@ pub struct Config {
     /// existed, hence the default.
     #[serde(default)]
     pub cluster: ClusterConfig,
+    /// Variant meshes; absent from configurations recorded before it
+    /// existed, hence the default (every triangle, PLY only).
+    #[serde(default)]
+    pub mesh: MeshConfig,
+}
+
+/// How `run` and `stage mesh` write each variant's mesh.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshConfig {
+    /// Triangle budget of mesh.ply (quadric decimation, sharp features and
+    /// colours kept); 0 keeps every triangle of the reconstruction.
+    pub faces: usize,
+    /// Also write mesh.glb (glTF binary with vertex colours) beside mesh.ply.
+    pub glb: bool,
 }
 
 /// Per-job resources of the cluster job graph, from the measured peaks of
