@@ -1,11 +1,14 @@
 // @brief Quadric-error decimation of a triangle mesh (Garland-Heckbert
 // quadrics, OpenMesh's DecimaterT), with sharp features kept.
 //
-// 1. The triangles go into an OpenMesh TriMesh. A triangle that OpenMesh
-//    refuses (a non-manifold edge or vertex) gets its own copies of its
-//    vertices, so no surface is lost; those copies and the vertices they copy
-//    are locked, so the seam stays closed. Every vertex remembers the input
-//    vertex it came from.
+// 1. The triangles go into an OpenMesh TriMesh, which holds only manifold
+//    surfaces. A triangle it refuses (an edge with more than two triangles,
+//    as surface nets make where two sheets touch, or a vertex joining two
+//    fans) is added with the fewest of its corners replaced by a second copy
+//    of their vertex, copies shared by all such triangles so that they form
+//    patches of their own; failing that, with three fresh copies. No surface
+//    is lost; the copies and the vertices they copy are locked, so the seams
+//    stay closed. Every vertex remembers the input vertex it came from.
 // 2. Sharp edges (dihedral angle above `feature_angle_deg`) are marked as
 //    features: a vertex on a feature line may only slide along it, and a
 //    vertex where the line ends or branches (a corner) is locked.
@@ -17,6 +20,12 @@
 //    index (colours).
 //
 // Errors are thrown as std::runtime_error and reach Rust as `Err`.
+
+// OpenMesh's headers assert on every property access (comparing type names
+// as std::strings): with them the decimater spent a third of its time in
+// string compares and allocations. Off in this translation unit only; the
+// checks guard OpenMesh's own invariants, not our input (checked below).
+#define NDEBUG
 
 // GCC 12 warns "may be used uninitialized" inside OpenMesh's property
 // containers: a false positive in library headers (see mesh_io.cpp).
@@ -85,7 +94,13 @@ DecimatedMesh decimate_mesh(rust::Slice<const float> positions,
 
   // 1. Build the mesh; refused triangles get their own vertex copies.
   std::vector<TriMesh::VertexHandle> handles(nv);
-  std::vector<TriMesh::VertexHandle> seam;  // copies, and the vertices they copy
+  // The second copy of each input vertex, made when first needed.
+  std::vector<TriMesh::VertexHandle> second(nv);
+  auto copy_of = [&](uint32_t i) {
+    auto v = mesh.add_vertex(mesh.point(handles[i]));
+    mesh.property(source, v) = i;
+    return v;
+  };
   for (size_t i = 0; i < nv; ++i) {
     handles[i] = mesh.add_vertex(
         TriMesh::Point(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]));
@@ -100,18 +115,37 @@ DecimatedMesh decimate_mesh(rust::Slice<const float> positions,
                                  std::to_string(idx[k]) + " out of range");
       tri[k] = handles[idx[k]];
     }
-    if (!mesh.add_face(tri[0], tri[1], tri[2]).is_valid()) {
+    if (mesh.add_face(tri[0], tri[1], tri[2]).is_valid()) continue;
+    // Subsets of the corners to replace by second copies, smallest first
+    // (bit k: corner k), then three fresh copies (subset 8).
+    bool added = false;
+    for (int subset : {1, 2, 4, 3, 5, 6, 7, 8}) {
+      TriMesh::VertexHandle alt[3];
       for (int k = 0; k < 3; ++k) {
-        tri[k] = mesh.add_vertex(mesh.point(handles[idx[k]]));
-        mesh.property(source, tri[k]) = idx[k];
-        seam.push_back(tri[k]);
-        seam.push_back(handles[idx[k]]);
+        if (subset == 8) {
+          alt[k] = copy_of(idx[k]);
+        } else if (subset & (1 << k)) {
+          if (!second[idx[k]].is_valid()) second[idx[k]] = copy_of(idx[k]);
+          alt[k] = second[idx[k]];
+        } else {
+          alt[k] = tri[k];
+        }
       }
-      mesh.add_face(tri[0], tri[1], tri[2]);
+      if (mesh.add_face(alt[0], alt[1], alt[2]).is_valid()) {
+        for (int k = 0; k < 3; ++k) {
+          if (alt[k] != tri[k]) {
+            mesh.status(alt[k]).set_locked(true);
+            mesh.status(tri[k]).set_locked(true);
+          }
+        }
+        added = true;
+        break;
+      }
     }
+    if (!added)  // three fresh vertices always make a face
+      throw std::runtime_error("triangle " + std::to_string(t / 3) + " could not be added");
   }
   mesh.update_face_normals();
-  for (auto v : seam) mesh.status(v).set_locked(true);
 
   // 2. Sharp features.
   DecimatedMesh out;

@@ -371,4 +371,19 @@ mod tests {
         std::fs::write(&p, a.to_toml()).unwrap();
         assert_eq!(Config::read(&p).unwrap(), a);
     }
+
+    #[test]
+    fn mesh_settings_default_for_old_configs_and_take_overrides() {
+        let a = Config::load("cpu", &[]).unwrap();
+        assert_eq!(a.mesh, MeshConfig { faces: 0, glb: false });
+        // A configuration recorded before [mesh] existed still reads.
+        let old: String = a.to_toml().split("[mesh]").next().unwrap().to_string();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("config.toml");
+        std::fs::write(&p, old).unwrap();
+        assert_eq!(Config::read(&p).unwrap(), a);
+        let b = a.with_overrides(&["mesh.faces=50000".into(), "mesh.glb=true".into()]).unwrap();
+        assert_eq!(b.mesh, MeshConfig { faces: 50000, glb: true });
+        assert!(a.with_overrides(&["mesh.faces=-1".into()]).is_err());
+    }
 }

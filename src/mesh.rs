@@ -375,7 +375,11 @@ pub struct DecimateOptions {
     pub target_faces: usize,
     /// Dihedral angle (degrees between face normals) above which an edge is a
     /// sharp feature: feature lines are simplified only along themselves and
-    /// their corners stay.
+    /// their corners stay. 180 (the default) marks none: the quadric error
+    /// alone already keeps creases (a collapse off a crease costs the squared
+    /// distance to both planes), while explicit lines at 60 or 80 degrees
+    /// marked 7-11% of the edges of a Poisson mesh at 256 (the demo tower's
+    /// stones) and stopped its decimation at 8-10 times the budget.
     pub feature_angle_deg: f64,
     /// Largest turn (degrees) of a face's normal that one collapse may cause:
     /// no fold-overs, no slivers flipping over.
@@ -384,7 +388,7 @@ pub struct DecimateOptions {
 
 impl DecimateOptions {
     pub fn new(target_faces: usize) -> Self {
-        DecimateOptions { target_faces, feature_angle_deg: 60.0, max_normal_deviation_deg: 60.0 }
+        DecimateOptions { target_faces, feature_angle_deg: 180.0, max_normal_deviation_deg: 60.0 }
     }
 }
 
@@ -400,8 +404,8 @@ pub struct DecimateReport {
 /// Reduces a mesh towards `options.target_faces` triangles by quadric-error
 /// halfedge collapses (OpenMesh's decimater; cpp/mesh_decimate.cpp). Every
 /// surviving vertex keeps its position and colour (per-corner colours are
-/// averaged onto vertices first); sharp features and open boundaries are
-/// kept. A budget at or above the mesh's triangle count returns the mesh
+/// averaged onto vertices first); open boundaries stay boundaries, and sharp
+/// edges are kept by the quadric error (or pinned as feature lines). A budget at or above the mesh's triangle count returns the mesh
 /// unchanged. The budget may be missed (more triangles remain) where no
 /// collapse is legal any more: the report says how many remain. Errors: a
 /// budget of 0, a textured mesh (its UVs would not survive).

@@ -92,28 +92,31 @@ fn decimation_meets_the_budget_keeps_colours_and_stays_on_the_surface() {
 fn decimation_keeps_sharp_edges_corners_and_a_red_face() {
     let cube = grid_cube(24);
     assert_eq!(cube.triangles.len(), 6 * 24 * 24 * 2);
-    let (light, report) = mesh::decimate(&cube, &DecimateOptions::new(40)).unwrap();
-    assert!((36..=40).contains(&light.triangles.len()), "{} triangles", light.triangles.len());
-    // The 12 edges of the cube, 24 grid edges each, were marked sharp.
-    assert_eq!(report.feature_edges, 12 * 24);
-    // The corners are locked.
-    for corner in 0..8 {
-        let p = Vec3::new([-1.0, 1.0][corner & 1], [-1.0, 1.0][(corner >> 1) & 1], [-1.0, 1.0][corner >> 2]);
-        assert!(light.positions.contains(&p), "corner {p} was collapsed");
-    }
-    // No triangle cuts across an edge of the cube: each lies in one side.
-    for t in &light.triangles {
-        let [a, b, c] = t.map(|i| light.positions[i as usize]);
-        let side = (0..3).any(|k| a[k].abs() == 1.0 && a[k] == b[k] && b[k] == c[k]);
-        assert!(side, "triangle {a} {b} {c} leaves the cube's sides");
-    }
-    // Every triangle of the top side is still red at all three corners.
-    let c = colours(&light);
-    let top: Vec<&[u32; 3]> =
-        light.triangles.iter().filter(|t| t.iter().all(|&i| light.positions[i as usize].z > 0.999)).collect();
-    assert!(!top.is_empty());
-    for t in top {
-        assert!(t.iter().all(|&i| c[i as usize] == RED), "a top triangle is not red");
+    // The quadric error alone (the default) and explicit feature lines.
+    for angle in [180.0, 60.0] {
+        let options = DecimateOptions { feature_angle_deg: angle, ..DecimateOptions::new(40) };
+        let (light, report) = mesh::decimate(&cube, &options).unwrap();
+        assert!((36..=40).contains(&light.triangles.len()), "{} triangles", light.triangles.len());
+        // At 60 degrees the cube's 12 edges, 24 grid edges each, are feature lines.
+        assert_eq!(report.feature_edges, if angle < 90.0 { 12 * 24 } else { 0 });
+        for corner in 0..8 {
+            let p = Vec3::new([-1.0, 1.0][corner & 1], [-1.0, 1.0][(corner >> 1) & 1], [-1.0, 1.0][corner >> 2]);
+            assert!(light.positions.contains(&p), "corner {p} was collapsed ({angle})");
+        }
+        // No triangle cuts across an edge of the cube: each lies in one side.
+        for t in &light.triangles {
+            let [a, b, c] = t.map(|i| light.positions[i as usize]);
+            let side = (0..3).any(|k| a[k].abs() == 1.0 && a[k] == b[k] && b[k] == c[k]);
+            assert!(side, "triangle {a} {b} {c} leaves the cube's sides ({angle})");
+        }
+        // Every triangle of the top side is still red at all three corners.
+        let c = colours(&light);
+        let top: Vec<&[u32; 3]> =
+            light.triangles.iter().filter(|t| t.iter().all(|&i| light.positions[i as usize].z > 0.999)).collect();
+        assert!(!top.is_empty());
+        for t in top {
+            assert!(t.iter().all(|&i| c[i as usize] == RED), "a top triangle is not red ({angle})");
+        }
     }
 }
 
