@@ -6,7 +6,7 @@
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup build demo test bench bench-poisson fuzz clean cluster-test interop
+.PHONY: setup build demo test bench bench-poisson decimate-bench fuzz clean cluster-test interop
 
 setup:
 	@bash scripts/setup.sh
@@ -43,6 +43,15 @@ bench: build
 	if [ -f $(TOWER) ]; then cargo run --release $(CARGO_FEATURES) --example recon_bench -- all mesh=$(TOWER); \
 	else cargo run --release $(CARGO_FEATURES) --example recon_bench; fi
 	cargo run --release $(CARGO_FEATURES) --example metrics_bench
+	if [ -f $(TOWER) ]; then $(MAKE) decimate-bench; fi
+
+# Light meshes of the ruined tower's 256^3 level: fidelity, time and file size
+# against the triangle budget (README, "Performance").
+decimate-bench: build
+	./target/release/shapeshifter encode $(TOWER) -o out/decimate
+	./target/release/shapeshifter mesh out/decimate/level_4.vdb -o out/decimate/full.ply
+	cargo run --release $(CARGO_FEATURES) --example decimate_bench -- \
+	  $(TOWER) out/decimate/level_4.vdb out/decimate/full.ply out/decimate
 
 # A long mutation campaign against every reader (README, "Hostile files").
 COUNT ?= 2000

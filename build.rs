@@ -4,8 +4,13 @@
 
 use std::path::Path;
 
-const CPP_FILES: &[&str] =
-    &["cpp/mesh_io.cpp", "cpp/vdb_io.cpp", "cpp/vdb_points.cpp", "cpp/recon_poisson.cpp"];
+const CPP_FILES: &[&str] = &[
+    "cpp/mesh_io.cpp",
+    "cpp/mesh_decimate.cpp",
+    "cpp/vdb_io.cpp",
+    "cpp/vdb_points.cpp",
+    "cpp/recon_poisson.cpp",
+];
 
 fn main() {
     let mut build = cxx_build::bridge("src/ffi.rs");
@@ -22,7 +27,8 @@ fn main() {
         .flag_if_supported("-Wno-unused-parameter");
     build.compile("shapeshifter_cpp");
 
-    for lib in ["openvdb", "tbb", "Imath-3_1", "OpenMeshCore", "mpfr", "gmp", "blosc"] {
+    // OpenMeshTools: the decimater's observer (cpp/mesh_decimate.cpp).
+    for lib in ["openvdb", "tbb", "Imath-3_1", "OpenMeshCore", "OpenMeshTools", "mpfr", "gmp", "blosc"] {
         println!("cargo:rustc-link-lib={lib}");
     }
     println!("cargo:rerun-if-changed=src/ffi.rs");

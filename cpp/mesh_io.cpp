@@ -40,8 +40,8 @@ unsigned char to_byte(float c) {
   const float v = c < 0.f ? 0.f : (c > 1.f ? 1.f : c);
   return static_cast<unsigned char>(v * 255.f + 0.5f);
 }
+} // namespace
 
-// OpenMesh reports problems on its own streams; we report them ourselves.
 void silence_openmesh() {
   static std::once_flag once;
   std::call_once(once, [] {
@@ -58,7 +58,6 @@ std::mutex &openmesh_io_mutex() {
   static std::mutex m;
   return m;
 }
-} // namespace
 
 MeshData read_mesh(rust::Str path) {
   silence_openmesh();

@@ -8,4 +8,7 @@ namespace shapeshifter {
 struct MeshData;
 MeshData read_mesh(rust::Str path);
 void write_mesh(rust::Str path, const MeshData &mesh, bool binary);
+// OpenMesh reports problems on its own streams (stderr); we report them
+// ourselves, as values: turn its streams off (once per process).
+void silence_openmesh();
 }

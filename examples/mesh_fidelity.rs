@@ -13,42 +13,8 @@
 //! prints one line per candidate: vertices, Chamfer and Hausdorff in voxels of
 //! LEVEL (a level file of EXEMPLAR, whose frame the candidates share).
 
-use glam::Vec3;
 use shapeshifter::encode::{encode, EncodeOptions};
 use shapeshifter::{mesh, metrics, pipeline, recon};
-
-/// `n` points spread over the triangles by area (deterministic).
-fn surface_samples(m: &mesh::Mesh, n: usize) -> Vec<Vec3> {
-    let areas: Vec<f32> = m
-        .triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| m.positions[i as usize]);
-            0.5 * (b - a).cross(c - a).length()
-        })
-        .collect();
-    let total: f32 = areas.iter().sum();
-    let mut out = Vec::with_capacity(n);
-    let mut state = 0x2545F4914F6CDD1Du64;
-    let mut rnd = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
-    for (t, area) in m.triangles.iter().zip(&areas) {
-        let k = (area / total * n as f32).round() as usize;
-        let [a, b, c] = t.map(|i| m.positions[i as usize]);
-        for _ in 0..k.max(1) {
-            let (mut u, mut v) = (rnd(), rnd());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            out.push(a + (b - a) * u + (c - a) * v);
-        }
-    }
-    out
-}
 
 /// `compare EXEMPLAR LEVEL CANDIDATE...`: Chamfer and Hausdorff of each candidate.
 fn compare(args: &[String]) -> anyhow::Result<()> {
@@ -60,10 +26,10 @@ fn compare(args: &[String]) -> anyhow::Result<()> {
     let (level, _) = shapeshifter::vdb::read_level(std::path::Path::new(level))?;
     // Exemplar units per voxel of the level.
     let voxel = (level.voxel_size() / level.frame.scale) as f32;
-    let a = surface_samples(&exemplar, 300_000);
+    let a = exemplar.surface_samples(300_000);
     for path in candidates {
         let m = mesh::load(std::path::Path::new(path))?;
-        let b = surface_samples(&m, 300_000);
+        let b = m.surface_samples(300_000);
         let chamfer = metrics::chamfer(&a, &b) / voxel;
         let hausdorff = metrics::hausdorff(&a, &b) / voxel;
         println!(
@@ -95,8 +61,8 @@ fn main() -> anyhow::Result<()> {
     let (meshed, used) = pipeline::mesh_level(level, !exemplar.is_closed(), method, Some(2 * finest))?;
     let seconds = t.elapsed().as_secs_f64();
     let voxel = (level.voxel_size() / level.frame.scale) as f32;
-    let a = surface_samples(&exemplar, 300_000);
-    let b = surface_samples(&meshed, 300_000);
+    let a = exemplar.surface_samples(300_000);
+    let b = meshed.surface_samples(300_000);
     let chamfer = metrics::chamfer(&a, &b) / voxel;
     let hausdorff = metrics::hausdorff(&a, &b) / voxel;
     println!(

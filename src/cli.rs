@@ -207,19 +207,29 @@ pub enum Command {
     /// Mesh a level file's oriented coloured points: Poisson (CGAL; closed
     /// shapes) or APSS (algebraic point set surfaces; open surfaces stay
     /// open). `auto` picks APSS when the exemplar was open. Vertex colours
-    /// from the nearest points; output in the exemplar's frame.
+    /// from the nearest points; output in the exemplar's frame, as PLY or
+    /// glTF binary (.glb), both with vertex colours. --faces makes a light
+    /// mesh: quadric decimation that keeps colours and sharp edges.
     ///
     /// Several level files: one mesh each in the folder OUT, named after the
-    /// inputs.
+    /// inputs, in --format.
     ///
     /// Example: shapeshifter mesh out/tower/level_4.vdb -o tower.ply --method poisson --depth 8
-    /// Example: shapeshifter mesh out/tower/variants/*/level_3.vdb -o meshes/
+    /// Example: shapeshifter mesh out/tower/level_4.vdb -o tower.glb --faces 100000
+    /// Example: shapeshifter mesh out/tower/variants/*/level_3.vdb -o meshes/ --format glb
     Mesh {
         #[arg(required = true)]
         inputs: Vec<PathBuf>,
-        /// The mesh file (one input), or the folder for several.
+        /// The mesh file, .ply or .glb (one input), or the folder for several.
         #[arg(short, long)]
         output: PathBuf,
+        /// Format of each mesh when there are several inputs (one input: the
+        /// extension of OUT).
+        #[arg(long, value_enum, default_value_t = MeshFormat::Ply)]
+        format: MeshFormat,
+        /// Decimate to at most this many triangles (0: keep every triangle).
+        #[arg(long, default_value_t = 0)]
+        faces: usize,
         #[arg(long, default_value = "auto")]
         method: String,
         /// Contouring grid cells along the longest axis of the points' box
@@ -440,6 +450,22 @@ pub struct RunArgs {
     pub setup: SetupArgs,
 }
 
+/// Mesh formats that keep vertex colours.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum MeshFormat {
+    Ply,
+    Glb,
+}
+
+impl std::fmt::Display for MeshFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            MeshFormat::Ply => "ply",
+            MeshFormat::Glb => "glb",
+        })
+    }
+}
+
 /// Many inputs in one command.
 #[derive(clap::Args, Debug, Clone)]
 pub struct BatchArgs {
@@ -583,7 +609,7 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
             c
         })?;
     }
-    let meshed = pipeline::run_mesh(&paths, 0..args.n)?;
+    let meshed = pipeline::run_mesh(&paths, 0..args.n, &config.mesh)?;
     log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
     times.push(("mesh", t.elapsed().as_secs_f64()));
     let t = std::time::Instant::now();
@@ -668,7 +694,8 @@ fn run_stage(stage: StageCmd, quiet: bool) -> Result<()> {
             println!("{} variants ({}..{}) -> {}", dirs.len(), first, first + n, dir.join("variants").display());
         }
         StageCmd::Mesh { dir, first, n } => {
-            let done = pipeline::run_mesh(&pipeline::RunPaths::new(&dir), first..first + n)?;
+            let config = recorded(&dir)?;
+            let done = pipeline::run_mesh(&pipeline::RunPaths::new(&dir), first..first + n, &config.mesh)?;
             println!("{done} variants meshed");
         }
         StageCmd::Eval { dir, n } => match pipeline::run_eval(&pipeline::RunPaths::new(&dir), n)? {
@@ -861,23 +888,33 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             run_one(Source::Demo, &output, &run, quiet, cli.threads)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Mesh { inputs, output, method, resolution, depth, preview, batch } => {
+        Command::Mesh { inputs, output, format, method, resolution, depth, faces, preview, batch } => {
             let resolution = resolution.or(depth.map(|d| 1 << d));
+            let several = inputs.len() > 1;
+            // Refuse a format that would drop the colours before the work.
+            let ext = if several {
+                format.to_string()
+            } else {
+                output.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default()
+            };
+            if !mesh::COLOUR_EXTENSIONS.contains(&ext.as_str()) {
+                anyhow::bail!("{}: mesh writes .ply or .glb (vertex colours), not '.{ext}'", output.display());
+            }
             let method = match method.as_str() {
                 "auto" => None,
                 m => Some(m.parse::<shapeshifter::recon::Method>().map_err(|e| anyhow::anyhow!("--method: {e}"))?),
             };
-            let several = inputs.len() > 1;
             if several && preview.is_some() {
                 anyhow::bail!("--preview takes one input (several: run `render` on the meshes)");
             }
             let names = shapeshifter::batch::output_names(&inputs)?;
             let report = shapeshifter::batch::run(&inputs, &names, batch.jobs, |input, name| {
-                let target = if several { output.join(format!("{name}.ply")) } else { output.clone() };
+                let target = if several { output.join(format!("{name}.{ext}")) } else { output.clone() };
                 let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", input.display());
                 let (level, provenance) = vdb::read_level(input).map_err(|e| e.to_string())?;
                 let (m, used) =
                     pipeline::mesh_level(&level, provenance.exemplar_open, method, resolution).map_err(|e| fail(&e))?;
+                let m = pipeline::light_mesh(m, faces).map_err(|e| fail(&e))?;
                 if several {
                     std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
                 }

@@ -27,6 +27,32 @@ pub mod bridge {
         pub faces_in_file: u64,
     }
 
+    /// Parameters of the quadric decimation (`decimate_mesh`).
+    #[derive(Clone, Debug)]
+    pub struct DecimateParams {
+        /// Stop when this many triangles remain (or no collapse is legal).
+        pub target_faces: u64,
+        /// Edges whose faces' normals differ by more than this (degrees) are
+        /// sharp features: kept as lines, their corners fixed.
+        pub feature_angle_deg: f64,
+        /// A collapse may turn a nearby face's normal by at most this (degrees).
+        pub max_normal_deviation_deg: f64,
+    }
+
+    /// A decimated triangle mesh as flat arrays.
+    #[derive(Clone, Debug, Default)]
+    pub struct DecimatedMesh {
+        /// 3 floats per vertex.
+        pub positions: Vec<f32>,
+        /// 3 vertex indices per triangle, in the input's orientation.
+        pub triangles: Vec<u32>,
+        /// For each vertex, the input vertex it is (collapses never move a
+        /// survivor), to carry per-vertex data such as colours.
+        pub source_vertex: Vec<u32>,
+        /// Edges marked as sharp features before decimating.
+        pub feature_edges: u64,
+    }
+
     /// Typed metadata entries, stored on every grid of a level file.
     pub struct MetaEntry {
         pub key: String,
@@ -140,6 +166,15 @@ pub mod bridge {
         include!("shapeshifter/cpp/mesh_io.h");
         fn read_mesh(path: &str) -> Result<MeshData>;
         fn write_mesh(path: &str, mesh: &MeshData, binary: bool) -> Result<()>;
+
+        include!("shapeshifter/cpp/mesh_decimate.h");
+        /// Quadric-error decimation (OpenMesh); `positions` 3 floats per
+        /// vertex, `triangles` 3 indices per triangle.
+        fn decimate_mesh(
+            positions: &[f32],
+            triangles: &[u32],
+            params: &DecimateParams,
+        ) -> Result<DecimatedMesh>;
 
         include!("shapeshifter/cpp/vdb_io.h");
         /// `volumes`: grids mask, density, P, N, Cd; `points`: the PointDataGrid.

@@ -17,6 +17,7 @@ pub mod evaluate;
 pub mod exemplar;
 pub mod grid;
 mod ffi;
+pub mod glb;
 pub mod info;
 pub mod ladder;
 pub mod level;

@@ -9,7 +9,7 @@
 //! OUT/config.toml                  the resolved configuration
 //! OUT/exemplar/                    encoded levels + manifest.json (+ previews)
 //! OUT/models/                      checkpoints, training state, loss plots
-//! OUT/variants/variant_000/        level_K.vdb, level_K.png, mesh.ply, mesh.png
+//! OUT/variants/variant_000/        level_K.vdb, level_K.png, mesh.ply, mesh.png (+ mesh.glb: [mesh] glb)
 //! OUT/eval.json                    metrics
 //! OUT/contact_sheet.png            the exemplar and the variants, one camera
 //! OUT/logs/                        logs of sampling/meshing child processes
@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::Config;
+use crate::config::{Config, MeshConfig};
 use crate::dataset;
 use crate::encode::{self, EncodeOptions, Pooling};
 use crate::error::{write_atomically, Error, Result};
@@ -519,9 +519,11 @@ pub fn mesh_level(
     Ok((mesh, method))
 }
 
-/// Meshes the finest level of every variant folder into `mesh.ply` and
-/// `mesh.png`; a variant that fails to mesh is reported and skipped.
-pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Result<usize> {
+/// Meshes the finest level of every variant folder into `mesh.ply` (and
+/// `mesh.glb` when `settings.glb`), decimated to `settings.faces` triangles
+/// when that is not 0, and `mesh.png`; a variant that fails to mesh is
+/// reported and skipped.
+pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settings: &MeshConfig) -> Result<usize> {
     let mut done = 0;
     for dir in dirs {
         // The mesh depends on the finest level's data: its file's digest,
@@ -534,12 +536,15 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
             }
         };
         let out = dir.join("mesh.ply");
+        let glb = dir.join("mesh.glb");
         let d = digest(&[
             &dataset::file_sha256(&finest_file).unwrap_or_default(),
             &resolution.to_string(),
             &exemplar_open.to_string(),
+            &settings.faces.to_string(),
+            &settings.glb.to_string(),
         ]);
-        if is_done(dir, "mesh", &d) && out.is_file() {
+        if is_done(dir, "mesh", &d) && out.is_file() && (glb.is_file() || !settings.glb) {
             done += 1;
             continue;
         }
@@ -550,9 +555,14 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
                 continue;
             }
         };
-        match mesh_level(&finest, exemplar_open, None, Some(resolution)) {
-            Ok((mesh, _)) => {
+        // No glTF file from an earlier setting beside a new mesh.ply.
+        let _ = std::fs::remove_file(&glb);
+        match mesh_level(&finest, exemplar_open, None, Some(resolution)).and_then(|(m, _)| light_mesh(m, settings.faces)) {
+            Ok(mesh) => {
                 crate::mesh::save(&mesh, &out, true)?;
+                if settings.glb {
+                    crate::mesh::save(&mesh, &glb, true)?;
+                }
                 let img = render::render_mesh(&mesh, &preview_options())?;
                 render::save_png(&img, &dir.join("mesh.png"))?;
                 mark_done(dir, "mesh", &d, 0.0)?;
@@ -566,6 +576,27 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32) -> Res
         }
     }
     Ok(done)
+}
+
+/// `mesh` decimated to `faces` triangles (0: as it is), with a log line
+/// saying what the decimation did.
+pub fn light_mesh(mesh: Mesh, faces: usize) -> Result<Mesh> {
+    if faces == 0 {
+        return Ok(mesh);
+    }
+    let t = std::time::Instant::now();
+    let (light, report) = crate::mesh::decimate(&mesh, &crate::mesh::DecimateOptions::new(faces))?;
+    log::info!(
+        "decimated {} -> {} triangles (budget {faces}, {} sharp edges kept) in {:.1} s",
+        report.faces_before,
+        report.faces_after,
+        report.feature_edges,
+        t.elapsed().as_secs_f64()
+    );
+    if report.faces_after > faces {
+        log::warn!("{} triangles remain above the budget of {faces}: no further collapse was legal", report.faces_after);
+    }
+    Ok(light)
 }
 
 /// The finest level in a folder of `level_K.vdb` files (a variant folder, an
@@ -763,8 +794,9 @@ pub fn run_sample(paths: &RunPaths, config: &Config, device: tch::Device, option
     sample_stage(&levels, &manifest.exemplar, manifest.open_surface, config, device, &paths.models(), &paths.variants(), options, true)
 }
 
-/// Stage 4: meshes the variants with indices in `range` that exist.
-pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>) -> Result<usize> {
+/// Stage 4: meshes the variants with indices in `range` that exist, as
+/// `settings` say (the configuration's `[mesh]`).
+pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>, settings: &MeshConfig) -> Result<usize> {
     let manifest = dataset::read_manifest(&paths.exemplar())?;
     let dirs: Vec<PathBuf> = range
         .map(|i| variant_dir(&paths.variants(), i))
@@ -776,7 +808,7 @@ pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>) -> Result<usize
             done
         })
         .collect();
-    mesh_stage(&dirs, manifest.open_surface, 256)
+    mesh_stage(&dirs, manifest.open_surface, 256, settings)
 }
 
 /// Stage 5: scores variants `0..n` against the exemplar into

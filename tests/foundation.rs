@@ -87,7 +87,7 @@ fn half_float_level_files_are_smaller_and_close() {
     let full = dir.path().join("full.vdb");
     let half = dir.path().join("half.vdb");
     vdb::write_level(&full, &level, &Provenance::default(), WriteOptions::default()).unwrap();
-    vdb::write_level(&half, &level, &Provenance::default(), WriteOptions { half_floats: true }).unwrap();
+    vdb::write_level(&half, &level, &Provenance::default(), WriteOptions { half_floats: true, ..Default::default() }).unwrap();
     let size = |p: &Path| std::fs::metadata(p).unwrap().len();
     assert!(size(&half) < size(&full), "half {} vs full {}", size(&half), size(&full));
     let (back, _) = vdb::read_level(&half).unwrap();
@@ -105,17 +105,29 @@ fn vdb_print_reads_our_level_files() {
     let level = sample_level();
     vdb::write_level(&path, &level, &Provenance { exemplar: "tower".into(), ..Default::default() }, WriteOptions::default())
         .unwrap();
-    let out = Command::new("vdb_print").args(["-l", "-m"]).arg(&path).output().unwrap();
-    assert!(out.status.success(), "{}", stderr(&out));
-    let text = stdout(&out);
-    for grid in ["mask", "density", "P", "N", "Cd", "points"] {
-        assert!(text.lines().any(|l| l.starts_with(&format!("Name: {grid}"))), "grid {grid} missing:\n{text}");
-    }
-    assert!(text.contains("vec3s") && text.contains("ptdataidx"), "types:\n{text}");
+    let print = |p: &std::path::Path| {
+        let out = Command::new("vdb_print").args(["-l", "-m"]).arg(p).output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        stdout(&out)
+    };
+    let names = |text: &str| -> Vec<String> {
+        let mut v: Vec<String> = text.lines().filter_map(|l| l.strip_prefix("Name: ")).map(String::from).collect();
+        v.sort();
+        v
+    };
+    // The volumes in the level file, the PointDataGrid in the points file beside it.
+    let text = print(&path);
+    assert_eq!(names(&text), ["Cd", "N", "P", "density", "mask"], "{text}");
+    assert!(text.contains("vec3s") && !text.contains("ptdataidx"), "types:\n{text}");
     assert!(text.contains("shapeshifter_resolution: 32"), "metadata:\n{text}");
-    assert!(text.contains("contravariant absolute") || text.contains("vector_type"), "vector types:\n{text}");
+    for vector_type in ["vector_type: contravariant absolute", "vector_type: covariant normalize", "vector_type: invariant"] {
+        assert!(text.contains(vector_type), "no '{vector_type}':\n{text}");
+    }
     let active = level.len().to_string();
     assert!(text.contains(&active), "voxel count {active} not reported:\n{text}");
+    let points = print(&vdb::points_path(&path));
+    assert_eq!(names(&points), ["points"], "{points}");
+    assert!(points.contains("ptdataidx") && points.contains("shapeshifter_resolution: 32"), "{points}");
 }
 
 #[test]
@@ -265,7 +277,8 @@ fn info_describes_level_files_and_meshes() {
     vdb::write_level(&vdb_path, &sample_level(), &Provenance { exemplar: "tower".into(), ..Default::default() }, WriteOptions::default()).unwrap();
     let ply = dir.path().join("t.ply");
     mesh::save(&coloured_tetra(), &ply, true).unwrap();
-    let o = shapeshifter(&["info", vdb_path.to_str().unwrap(), ply.to_str().unwrap()]);
+    let points = vdb::points_path(&vdb_path);
+    let o = shapeshifter(&["info", vdb_path.to_str().unwrap(), points.to_str().unwrap(), ply.to_str().unwrap()]);
     let text = stdout(&o);
     assert!(o.status.success(), "{}", stderr(&o));
     for needle in ["mask", "points", "Cd", "resolution", "tower", "triangles", "closed", "vertex colours"] {
