@@ -34,18 +34,18 @@ trap 'rm -rf "$WORK"' EXIT
 mkdir -p "$OUT"
 
 # A small but complete run: the demo exemplar through 32^3, two variants,
-# meshes light enough for a DCC scene (and a .glb beside each).
+# each meshed as mesh.ply decimated to 3000 triangles and mesh.glb.
 "$ROOT/target/release/examples/demo_exemplar" "$WORK/mesh" > /dev/null
 MESH=$WORK/mesh/demo_tower.ply
 "$BIN" -q run "$MESH" -o "$WORK/run" -n 2 --seed 1 \
   --set encode.sampling_resolution=128 --set encode.finest_resolution=32 \
   --set train.level0_iterations=300 --set train.upper_iterations=60 --set train.upsampler_iterations=60 \
-  > "$WORK/run.log"
+  --set mesh.faces=3000 --set mesh.glb=true > "$WORK/run.log"
 LEVELS=$(find "$WORK/run" -name 'level_*.vdb' ! -name '*.points.vdb' | sort)
 POINTS=$(find "$WORK/run" -name 'level_*.points.vdb' | sort)
 # Meshes: the exemplar's finest level (32^3) meshed as PLY and glTF binary.
-"$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.ply"
-"$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.glb"
+"$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.ply" > /dev/null
+"$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.glb" > /dev/null
 MESHES=$(ls "$WORK"/exemplar_level_1.ply "$WORK"/exemplar_level_1.glb; find "$WORK/run/variants" -name 'mesh.*' ! -name '*.png' | sort)
 "$BIN" info --json "$MESH" > "$WORK/mesh_info.json"
 echo "interop: $(wc -w <<< "$LEVELS") level files, $(wc -w <<< "$POINTS") points files, $(wc -w <<< "$MESHES") meshes"

@@ -12,7 +12,14 @@ import os
 import sys
 
 import bpy
+import numpy
 from mathutils import Vector
+
+# Blender 3.4's glTF importer uses numpy.bool, which Debian 12's numpy 1.24
+# removed: every glTF import fails without this alias (a Blender/numpy
+# mismatch, not a property of the file; the alias is what numpy.bool was).
+if not hasattr(numpy, "bool"):
+    numpy.bool = bool
 
 args = sys.argv[sys.argv.index("--") + 1:]
 info = json.load(open(args[0]))["outcomes"][0]["result"]
@@ -84,6 +91,7 @@ for path in meshes:
         a, b = Vector([min(a[i], b[i]) for i in range(3)]), Vector([max(a[i], b[i]) for i in range(3)])
     on_top(path, a, b, 0.05 * size)
     attr = me.color_attributes[0]
-    print(f"interop: blender: {os.path.basename(path)}: {len(me.vertices)} vertices, {len(me.polygons)} faces, "
+    shown = os.path.join(os.path.basename(os.path.dirname(path)), os.path.basename(path))
+    print(f"interop: blender: {shown}: {len(me.vertices)} vertices, {len(me.polygons)} faces, "
           f"colours '{attr.name}' ({attr.domain.lower()}), on the exemplar's bounds")
 print(f"interop: blender: all {len(meshes)} meshes import with vertex colours")

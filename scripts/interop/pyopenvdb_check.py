@@ -45,6 +45,7 @@ for path in files:
     n = mask.activeVoxelCount()
     if n == 0:
         fail(f"{path}: no active voxels")
-print(f"interop: pyopenvdb {getattr(vdb, '__version__', '?')}: readAll and readAllGridMetadata read all "
+version = '.'.join(str(v) for v in getattr(vdb, 'LIBRARY_VERSION', ())) or '?'
+print(f"interop: pyopenvdb (OpenVDB {version}): readAll and readAllGridMetadata read all "
       f"{len(files)} level files: grids mask, density (float), P, N, Cd (vec3s), metadata present, "
       f"every level inside the exemplar's bounds")
