@@ -621,6 +621,7 @@ fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, t
     println!("  variants         {} ({} folders, previews level_K.png)", paths.variants().display(), dirs.len());
     println!("  metrics          {}", paths.eval_json().display());
     println!("  contact sheet    {}", paths.contact_sheet().display());
+    println!("  report           {}", paths.report().display());
     println!("  time             {}  (total {:.0} s)",
         times.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect::<Vec<_>>().join(", "), t0.elapsed().as_secs_f64());
     match evaluation {
