@@ -44,10 +44,12 @@ fn stamp_path(dir: &Path, stage: &str) -> PathBuf {
 
 /// Whether `stage` finished in `dir` with the same digest.
 fn is_done(dir: &Path, stage: &str, digest: &str) -> bool {
-    std::fs::read_to_string(stamp_path(dir, stage))
-        .ok()
-        .and_then(|t| serde_json::from_str::<Stamp>(&t).ok())
-        .is_some_and(|s| s.digest == digest)
+    read_stamp(dir, stage).is_some_and(|s| s.digest == digest)
+}
+
+/// The stamp `stage` left in `dir`, if there is one and it reads.
+fn read_stamp(dir: &Path, stage: &str) -> Option<Stamp> {
+    serde_json::from_str(&std::fs::read_to_string(stamp_path(dir, stage)).ok()?).ok()
 }
 
 fn mark_done(dir: &Path, stage: &str, digest: &str, seconds: f64) -> Result<()> {
@@ -526,6 +528,7 @@ pub fn mesh_level(
 pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settings: &MeshConfig) -> Result<usize> {
     let mut done = 0;
     for dir in dirs {
+        let t = Instant::now();
         // The mesh depends on the finest level's data: its file's digest,
         // checked before anything is read (a finished mesh costs one hash).
         let finest_file = match crate::evaluate::level_files(dir) {
@@ -565,7 +568,7 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settin
                 }
                 let img = render::render_mesh(&mesh, &preview_options())?;
                 render::save_png(&img, &dir.join("mesh.png"))?;
-                mark_done(dir, "mesh", &d, 0.0)?;
+                mark_done(dir, "mesh", &d, t.elapsed().as_secs_f64())?;
                 done += 1;
             }
             Err(e) => {
@@ -861,10 +864,7 @@ pub fn run_eval(paths: &RunPaths, n: usize) -> Result<Option<crate::evaluate::Ev
 /// configuration.
 pub fn write_report(paths: &RunPaths, n: usize, evaluation: Option<&crate::evaluate::Evaluation>) -> Result<()> {
     let read = |p: &Path| std::fs::read(p).ok();
-    let seconds = |dir: &Path, stage: &str| -> Option<f64> {
-        let text = std::fs::read_to_string(stamp_path(dir, stage)).ok()?;
-        serde_json::from_str::<Stamp>(&text).ok().map(|s| s.seconds)
-    };
+    let seconds = |dir: &Path, stage: &str| read_stamp(dir, stage).map(|s| s.seconds);
     let config = paths.read_config()?;
     let exemplar_name = dataset::read_manifest(&paths.exemplar()).map(|m| m.exemplar).unwrap_or_default();
     let levels = config.levels();
