@@ -13,7 +13,7 @@ const CPP_FILES: &[&str] = &[
 ];
 
 fn main() {
-    let mut build = cxx_build::bridge("src/ffi.rs");
+    let mut build = cxx_build::bridge("src/io/ffi.rs");
     build
         .files(CPP_FILES)
         .std("c++17")
@@ -31,7 +31,7 @@ fn main() {
     for lib in ["openvdb", "tbb", "Imath-3_1", "OpenMeshCore", "OpenMeshTools", "mpfr", "gmp", "blosc"] {
         println!("cargo:rustc-link-lib={lib}");
     }
-    println!("cargo:rerun-if-changed=src/ffi.rs");
+    println!("cargo:rerun-if-changed=src/io/ffi.rs");
     println!("cargo:rerun-if-changed=cpp");
     for f in CPP_FILES {
         println!("cargo:rerun-if-changed={f}");

@@ -33,7 +33,7 @@
 
 #include "shapeshifter/cpp/mesh_decimate.h"
 #include "shapeshifter/cpp/mesh_io.h"
-#include "shapeshifter/src/ffi.rs.h"
+#include "shapeshifter/src/io/ffi.rs.h"
 
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>

@@ -12,7 +12,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 
 #include "shapeshifter/cpp/mesh_io.h"
-#include "shapeshifter/src/ffi.rs.h"
+#include "shapeshifter/src/io/ffi.rs.h"
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>

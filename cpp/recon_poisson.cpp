@@ -12,28 +12,18 @@
 //      a cotangent Laplacian (plus 0.1 on the diagonal of input vertices)
 //      against the divergence of the normal field, by conjugate gradients;
 //      shifted so that its median over the input points is 0, negative inside.
-//   3. Contouring, two ways:
-//      - poisson_reconstruct: CGAL's surface mesher (Delaunay refinement of a
-//        second triangulation under facet criteria angle / radius / distance),
-//        adaptive and sequential; here with the Poisson oracle, which
-//        intersects the linear function exactly once a segment lies in one
-//        tetrahedron, and with each component oriented by the function.
-//      - poisson_grid: the function sampled, in parallel (TBB), at the corners
-//        of the grid cells around its zero set; the Rust side polygonises
-//        them (surface nets). Dense and uniform, like marching cubes.
+//   3. Contouring (poisson_grid): the function sampled, in parallel (TBB), at
+//      the corners of the grid cells around its zero set; the Rust side
+//      polygonises them (surface nets). Dense and uniform, like marching
+//      cubes. (CGAL's own surface mesher, adaptive and sequential, took ~50
+//      CPU-s for triangles near the spacing and is not used.)
 //
-// Where the time goes (149k points, CPU seconds): 1. ~6, 2. ~3 assembly +
-// ~1.5 solve (Eigen's default tolerance, machine epsilon, takes 1.5x the
-// iterations of 1e-6 for the same surface), 3. ~1 for CGAL's default criteria
-// (2k vertices) but ~50 for triangles near the spacing (sm_radius 1, 100k
-// vertices); the grid gives 940k vertices at 1/2 spacing in ~3 (2 threads).
 // Steps 1 and 2 are CGAL's own sequential code and grow with the
-// triangulation (313k vertices for those 149k points, mostly Steiner points
-// around near-duplicates): src/recon.rs therefore hands over points clustered
-// per 1.5 spacings and normal direction (60k, 108k vertices, ~2.6 + 0.3).
+// triangulation (mostly Steiner points around near-duplicate points), so the
+// Rust side hands over points clustered per 1.5 spacings and normal direction
+// (src/recon/mod.rs; figures in the README's performance section).
 //
-// Units: `spacing` and `grid_cell` in world units; sm_radius and sm_distance
-// in spacings.
+// Units: `spacing` and `grid_cell` in world units.
 
 // CGAL, Eigen and Boost check assertions unless NDEBUG: this file is always
 // built as release code.
@@ -41,16 +31,11 @@
 #define NDEBUG
 #endif
 #include "shapeshifter/cpp/recon_poisson.h"
-#include "shapeshifter/src/ffi.rs.h"
+#include "shapeshifter/src/io/ffi.rs.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <CGAL/Poisson_implicit_surface_3.h>
 #include <CGAL/Poisson_reconstruction_function.h>
-#include <CGAL/Surface_mesh.h>
-#include <CGAL/Surface_mesh_default_triangulation_3.h>
 #include <CGAL/compute_average_spacing.h>
-#include <CGAL/make_surface_mesh.h>
-#include <CGAL/IO/facets_in_complex_2_to_triangle_mesh.h>
 #include <CGAL/property_map.h>
 
 #include <tbb/blocked_range.h>
@@ -83,8 +68,6 @@ using PointWithNormal = std::pair<Point, Vector>;
 using PointMap = CGAL::First_of_pair_property_map<PointWithNormal>;
 using NormalMap = CGAL::Second_of_pair_property_map<PointWithNormal>;
 using PoissonFunction = CGAL::Poisson_reconstruction_function<Kernel>;
-using STr = CGAL::Surface_mesh_default_triangulation_3;
-using C2t3 = CGAL::Surface_mesh_complex_2_in_triangulation_3<STr>;
 // Phase times are process CPU seconds (std::clock): CGAL's Poisson runs on the
 // calling thread, and CPU time stays meaningful on a loaded machine.
 struct Clock {
@@ -157,85 +140,6 @@ std::vector<PointWithNormal> to_points(rust::Slice<const float> points,
   return out;
 }
 
-// Triangles of a manifold complex as flat arrays, each connected component
-// oriented consistently (CGAL's propagation) and then turned so that the
-// implicit function grows along the triangle normals (f < 0 inside), by a
-// vote of (up to 64 of) the component's triangles. CGAL itself orients only
-// the component with the highest facet.
-template <typename Function>
-void extract_oriented(const C2t3 &c2t3, const Function &f, double spacing,
-                      MeshOut &out) {
-  CGAL::Surface_mesh<Point> sm;
-  CGAL::facets_in_complex_2_to_triangle_mesh(c2t3, sm);
-
-  std::unordered_map<std::size_t, uint32_t> index;  // surface-mesh vertex -> output
-  index.reserve(sm.number_of_vertices());
-  out.positions.reserve(3 * sm.number_of_vertices());
-  for (auto v : sm.vertices()) {
-    index.emplace(std::size_t(v), uint32_t(index.size()));
-    const Point &p = sm.point(v);
-    out.positions.push_back(float(p.x()));
-    out.positions.push_back(float(p.y()));
-    out.positions.push_back(float(p.z()));
-  }
-  std::vector<std::array<uint32_t, 3>> tris;
-  tris.reserve(sm.number_of_faces());
-  for (auto fc : sm.faces()) {
-    std::array<uint32_t, 3> t{};
-    int k = 0;
-    for (auto v : CGAL::vertices_around_face(sm.halfedge(fc), sm)) {
-      if (k < 3) t[k] = index.at(std::size_t(v));
-      ++k;
-    }
-    if (k == 3) tris.push_back(t);
-  }
-
-  // Components over shared edges (union-find on triangles).
-  std::vector<uint32_t> parent(tris.size());
-  std::iota(parent.begin(), parent.end(), 0u);
-  auto find = [&](uint32_t a) {
-    while (parent[a] != a) a = parent[a] = parent[parent[a]];
-    return a;
-  };
-  std::unordered_map<uint64_t, uint32_t> edge_owner;
-  edge_owner.reserve(tris.size() * 2);
-  for (uint32_t t = 0; t < tris.size(); ++t)
-    for (int e = 0; e < 3; ++e) {
-      uint64_t a = tris[t][e], b = tris[t][(e + 1) % 3];
-      if (a > b) std::swap(a, b);
-      auto [it, fresh] = edge_owner.emplace((a << 32) | b, t);
-      if (!fresh) parent[find(t)] = find(it->second);
-    }
-
-  // Vote: f(c + h n) > f(c - h n) means n points outwards.
-  const double h = 0.25 * spacing;
-  std::unordered_map<uint32_t, long> votes, cast;
-  const float *P = out.positions.data();
-  for (uint32_t t = 0; t < tris.size(); ++t) {
-    const float *a = P + 3 * tris[t][0], *b = P + 3 * tris[t][1], *c = P + 3 * tris[t][2];
-    const Vector ab(b[0] - a[0], b[1] - a[1], b[2] - a[2]);
-    const Vector ac(c[0] - a[0], c[1] - a[1], c[2] - a[2]);
-    Vector n = CGAL::cross_product(ab, ac);
-    const double len = std::sqrt(n.squared_length());
-    if (!(len > 0.0) || cast[find(t)] >= 64) continue;
-    n = n / len;
-    const Point centre((a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0,
-                       (a[2] + b[2] + c[2]) / 3.0);
-    const double df = f(centre + h * n) - f(centre - h * n);
-    if (df != 0.0) {
-      votes[find(t)] += df > 0.0 ? 1 : -1;
-      ++cast[find(t)];
-    }
-  }
-  out.triangles.reserve(3 * tris.size());
-  for (uint32_t t = 0; t < tris.size(); ++t) {
-    const bool flip = votes[find(t)] < 0;
-    out.triangles.push_back(tris[t][0]);
-    out.triangles.push_back(tris[t][flip ? 2 : 1]);
-    out.triangles.push_back(tris[t][flip ? 1 : 2]);
-  }
-}
-
 // Steps 1 and 2: the implicit function, f < 0 inside, 0 at the median input point.
 std::unique_ptr<PoissonFunction> implicit_function(rust::Slice<const float> points,
                                                    rust::Slice<const float> normals,
@@ -287,46 +191,6 @@ uint64_t pack(int x, int y, int z) {
 }
 
 }  // namespace
-
-MeshOut poisson_reconstruct(rust::Slice<const float> points,
-                            rust::Slice<const float> normals,
-                            const PoissonParams &params) {
-  if (!(params.sm_angle > 0.0 && params.sm_angle <= 30.0))
-    throw std::runtime_error("poisson: sm_angle must lie in (0, 30] degrees, got " +
-                             std::to_string(params.sm_angle));
-  if (!(params.sm_radius > 0.0) || !(params.sm_distance > 0.0))
-    throw std::runtime_error("poisson: sm_radius and sm_distance must be positive");
-  MeshOut out;
-  PoissonStats &stats = out.stats;
-  const auto function = implicit_function(points, normals, params, stats);
-  const double spacing = stats.spacing;
-
-  // 3. Contouring, set up as CGAL::poisson_surface_reconstruction_delaunay
-  //    does (mesher sphere 5x the bounding radius around the sink), but with
-  //    the Poisson oracle.
-  auto t0 = Clock::now();
-  const Point inner = function->get_inner_point();
-  const Sphere bsphere = function->bounding_sphere();
-  const FT radius = std::sqrt(CGAL::to_double(bsphere.squared_radius()));
-  const FT sm_sphere_radius = 5.0 * radius;
-  const FT sm_dichotomy_error = params.sm_distance * spacing / 1000.0;
-  using Surface = CGAL::Poisson_implicit_surface_3<Kernel, PoissonFunction>;
-  Surface surface(*function, Sphere(inner, sm_sphere_radius * sm_sphere_radius),
-                  sm_dichotomy_error / sm_sphere_radius);
-  CGAL::Surface_mesh_default_criteria_3<STr> criteria(
-      params.sm_angle, params.sm_radius * spacing, params.sm_distance * spacing);
-  STr tr;
-  C2t3 c2t3(tr);
-  CGAL::make_surface_mesh(c2t3, surface, criteria, CGAL::Manifold_with_boundary_tag());
-  stats.seconds_mesh = seconds_since(t0);
-  if (tr.number_of_vertices() == 0 || c2t3.number_of_facets() == 0)
-    throw std::runtime_error("poisson: the surface mesher found no surface");
-
-  t0 = Clock::now();
-  extract_oriented(c2t3, *function, spacing, out);
-  stats.seconds_output = seconds_since(t0);
-  return out;
-}
 
 PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const float> normals,
                          const PoissonParams &params) {

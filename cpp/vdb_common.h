@@ -1,6 +1,6 @@
 // @brief Helpers shared by the OpenVDB translation units (not part of the bridge).
 #pragma once
-#include "shapeshifter/src/ffi.rs.h"
+#include "shapeshifter/src/io/ffi.rs.h"
 #include <openvdb/openvdb.h>
 #include <mutex>
 

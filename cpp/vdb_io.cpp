@@ -6,7 +6,7 @@
 // takes the topology from `mask` and the features from P/N/Cd at the same
 // voxels, so a level file edited in a DCC tool comes back voxel for voxel.
 #include "shapeshifter/cpp/vdb_io.h"
-#include "shapeshifter/src/ffi.rs.h"
+#include "shapeshifter/src/io/ffi.rs.h"
 #include "shapeshifter/cpp/vdb_common.h"
 
 #include <openvdb/io/File.h>
@@ -83,17 +83,17 @@ using openvdb::Vec3fGrid;
 
 void set_meta(openvdb::GridBase &grid, const rust::Vec<MetaEntry> &meta) {
   for (const auto &m : meta) {
-    const std::string key(m.key), kind(m.kind);
-    if (kind == "string") {
+    const std::string key(m.key);
+    if (m.kind == MetaKind::Text) {
       grid.insertMeta(key, openvdb::StringMetadata(std::string(m.text)));
-    } else if (kind == "int") {
+    } else if (m.kind == MetaKind::Int) {
       grid.insertMeta(key, openvdb::Int64Metadata(static_cast<int64_t>(m.number)));
-    } else if (kind == "float") {
+    } else if (m.kind == MetaKind::Float) {
       grid.insertMeta(key, openvdb::DoubleMetadata(m.number));
-    } else if (kind == "vec3d") {
+    } else if (m.kind == MetaKind::Vec3) {
       grid.insertMeta(key, openvdb::Vec3DMetadata(openvdb::Vec3d(m.vec[0], m.vec[1], m.vec[2])));
     } else {
-      throw std::invalid_argument("unknown metadata kind " + kind);
+      throw std::invalid_argument("metadata " + key + ": unknown kind");
     }
   }
 }
@@ -101,24 +101,24 @@ void set_meta(openvdb::GridBase &grid, const rust::Vec<MetaEntry> &meta) {
 rust::Vec<MetaEntry> get_meta(const openvdb::GridBase &grid) {
   rust::Vec<MetaEntry> out;
   for (auto it = grid.beginMeta(); it != grid.endMeta(); ++it) {
-    MetaEntry e{rust::String(it->first), rust::String("string"), rust::String(), 0.0, {0, 0, 0}};
+    MetaEntry e{rust::String(it->first), MetaKind::Text, rust::String(), 0.0, {0, 0, 0}};
     const auto &value = *it->second;
     const std::string type = value.typeName();
     if (type == "int32" || type == "int64" || type == "bool") {
-      e.kind = "int";
+      e.kind = MetaKind::Int;
       e.number = value.asBool() ? 1.0 : 0.0;
       if (type == "int64") e.number = double(static_cast<const openvdb::Int64Metadata &>(value).value());
       if (type == "int32") e.number = double(static_cast<const openvdb::Int32Metadata &>(value).value());
     } else if (type == "float" || type == "double") {
-      e.kind = "float";
+      e.kind = MetaKind::Float;
       e.number = type == "double" ? static_cast<const openvdb::DoubleMetadata &>(value).value()
                                   : static_cast<const openvdb::FloatMetadata &>(value).value();
     } else if (type == "vec3d") {
-      e.kind = "vec3d";
+      e.kind = MetaKind::Vec3;
       const auto v = static_cast<const openvdb::Vec3DMetadata &>(value).value();
       e.vec = {v[0], v[1], v[2]};
     } else if (type == "vec3i") {
-      e.kind = "vec3d";
+      e.kind = MetaKind::Vec3;
       const auto v = static_cast<const openvdb::Vec3IMetadata &>(value).value();
       e.vec = {double(v[0]), double(v[1]), double(v[2])};
     }

@@ -21,9 +21,9 @@ use std::time::Instant;
 
 use glam::{IVec3, Vec3};
 use shapeshifter::encode::{encode, EncodeOptions};
-use shapeshifter::grid::SparseGrid;
-use shapeshifter::mesh;
-use shapeshifter::sparse_conv::{set_cpu_chunk_bytes, tune_malloc, SparseTensor, SubmConv3d};
+use shapeshifter::learn::grid::SparseGrid;
+use shapeshifter::io::mesh;
+use shapeshifter::learn::sparse::{set_cpu_chunk_bytes, SparseTensor, SubmConv3d};
 use tch::{nn::VarStore, Device, Kind, Tensor};
 
 fn shell(res: i32, radius: f32, thickness: f32) -> Vec<IVec3> {
@@ -63,7 +63,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if !args.iter().any(|a| a == "--no-tune") {
-        tune_malloc();
+        shapeshifter::util::alloc::tune_allocator();
     }
     if let Ok(b) = std::env::var("SPARSE_CHUNK_BYTES") {
         set_cpu_chunk_bytes(b.parse().expect("SPARSE_CHUNK_BYTES"));

@@ -11,8 +11,8 @@
 
 use std::path::{Path, PathBuf};
 
-use shapeshifter::mesh::{self, DecimateOptions};
-use shapeshifter::{metrics, vdb};
+use shapeshifter::io::mesh::{self, DecimateOptions};
+use shapeshifter::{eval::metrics, io::vdb};
 
 /// CPU seconds used by this process so far.
 fn cpu_seconds() -> f64 {

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use shapeshifter::{exemplar, mesh, render};
+use shapeshifter::{encode::exemplar, io::mesh, render};
 
 fn main() -> anyhow::Result<()> {
     let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "out/exemplar".into()));

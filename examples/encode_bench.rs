@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use shapeshifter::encode::{encode, EncodeOptions, EncodeStats, Pooling};
-use shapeshifter::mesh;
+use shapeshifter::io::mesh;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -48,7 +48,7 @@ fn main() {
         Ok(m) => m,
         Err(_) if args.get(1).is_none() && !Path::new(default).exists() => {
             println!("{default} absent: the embedded demo exemplar instead");
-            shapeshifter::exemplar::ruined_tower(&Default::default())
+            shapeshifter::encode::exemplar::ruined_tower(&Default::default())
         }
         Err(e) => {
             eprintln!("error: {e}");

@@ -14,7 +14,7 @@
 //! LEVEL (a level file of EXEMPLAR, whose frame the candidates share).
 
 use shapeshifter::encode::{encode, EncodeOptions};
-use shapeshifter::{mesh, metrics, pipeline, recon};
+use shapeshifter::{io::mesh, eval::metrics, pipeline, recon};
 
 /// `compare EXEMPLAR LEVEL CANDIDATE...`: Chamfer and Hausdorff of each candidate.
 fn compare(args: &[String]) -> anyhow::Result<()> {
@@ -23,7 +23,7 @@ fn compare(args: &[String]) -> anyhow::Result<()> {
     };
     anyhow::ensure!(!candidates.is_empty(), "compare: no candidate meshes");
     let exemplar = mesh::load(std::path::Path::new(exemplar))?;
-    let (level, _) = shapeshifter::vdb::read_level(std::path::Path::new(level))?;
+    let (level, _) = shapeshifter::io::vdb::read_level(std::path::Path::new(level))?;
     // Exemplar units per voxel of the level.
     let voxel = (level.voxel_size() / level.frame.scale) as f32;
     let a = exemplar.surface_samples(300_000);

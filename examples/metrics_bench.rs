@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use glam::Vec3;
 use shapeshifter::level::Frame;
-use shapeshifter::mesh::Mesh;
-use shapeshifter::metrics::*;
+use shapeshifter::io::mesh::Mesh;
+use shapeshifter::eval::metrics::*;
 
 /// A closed bumpy sphere: UV sphere with `rings` x `segs` quads, radius
 /// modulated by a few sines (phase `phase`), about 2 * rings * segs triangles.
@@ -18,7 +18,7 @@ fn bumpy_sphere(rings: u32, segs: u32, phase: f32) -> Mesh {
         1.0 + 0.08 * (5.0 * ph + phase).sin() * (4.0 * th).sin()
             + 0.04 * (11.0 * ph - 2.0 * phase).cos() * (9.0 * th).sin()
     };
-    shapeshifter::shapes::uv_sphere(Vec3::ZERO, rings, segs, radius)
+    shapeshifter::testing::shapes::uv_sphere(Vec3::ZERO, rings, segs, radius)
 }
 
 fn frame_of(mesh: &Mesh) -> Frame {

@@ -12,7 +12,7 @@
 //! `out=PATH` also writes the mesh (PLY with vertex colours, exemplar frame).
 //!
 //! METHOD: all (default), poisson, apss.
-//! Keys: res=256 (sampling), mesher=cgal, sm_distance= sm_radius= sm_angle= tol= cluster=,
+//! Keys: res=256 (sampling), tol= cluster= project=,
 //! resolution= (both), radius= band= (APSS).
 
 use glam::Vec3;
@@ -150,11 +150,11 @@ fn main() {
     let t = Instant::now();
     let pts = match (exemplar, level) {
         (_, Some(path)) => {
-            let (level, _) = shapeshifter::vdb::read_level(std::path::Path::new(path)).expect("read level=PATH");
+            let (level, _) = shapeshifter::io::vdb::read_level(std::path::Path::new(path)).expect("read level=PATH");
             shapeshifter::pipeline::oriented_points(&level).expect("active voxels")
         }
         (Some(path), None) => {
-            let m = shapeshifter::mesh::load(std::path::Path::new(path)).expect("load mesh=PATH");
+            let m = shapeshifter::io::mesh::load(std::path::Path::new(path)).expect("load mesh=PATH");
             let (levels, _) = shapeshifter::encode::encode(&m, &Default::default()).expect("encode");
             shapeshifter::pipeline::oriented_points(levels.last().expect("levels")).expect("active voxels")
         }
@@ -182,16 +182,10 @@ fn main() {
         }
         "poisson" => {
             let mut o = PoissonOptions::default();
-            o.sm_distance = get("sm_distance").unwrap_or(o.sm_distance);
-            o.sm_radius = get("sm_radius").unwrap_or(o.sm_radius);
-            o.sm_angle = get("sm_angle").unwrap_or(o.sm_angle);
             o.solver_tolerance = get("tol").unwrap_or(o.solver_tolerance);
             o.resolution = get("resolution").map_or(o.resolution, |v| v as u32);
             o.cluster = get("cluster").map_or(o.cluster, |v| v as f32);
             o.project_steps = get("project").map_or(o.project_steps, |v| v as u32);
-            if args.iter().any(|a| a == "mesher=cgal") {
-                o.mesher = shapeshifter::recon::PoissonMesher::Cgal;
-            }
             let (m, r) = poisson_report(&pts, &o).unwrap();
             println!("  {o:?}");
             println!(
@@ -224,13 +218,13 @@ fn main() {
         rss0
     );
     if let Some(out) = args.iter().find_map(|a| a.strip_prefix("out=")) {
-        let m = shapeshifter::mesh::Mesh {
+        let m = shapeshifter::io::mesh::Mesh {
             name: method.clone(),
             positions: mesh.positions,
             triangles: mesh.triangles,
-            colours: shapeshifter::mesh::MeshColours::PerVertex(mesh.colours),
+            colours: shapeshifter::io::mesh::MeshColours::PerVertex(mesh.colours),
             texture: None,
         };
-        shapeshifter::mesh::save(&m, std::path::Path::new(out), true).expect("write out=PATH");
+        shapeshifter::io::mesh::save(&m, std::path::Path::new(out), true).expect("write out=PATH");
     }
 }

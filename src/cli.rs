@@ -9,8 +9,8 @@ use clap::{Parser, Subcommand};
 use shapeshifter::encode::{EncodeOptions, Pooling};
 use shapeshifter::render::{self, RenderOptions};
 use shapeshifter::config::Config;
-use shapeshifter::sample::{self, SampleOptions};
-use shapeshifter::{dataset, edit, evaluate, info, mesh, pipeline, sparse_conv, vdb};
+use shapeshifter::learn::sample::{self, SampleOptions};
+use shapeshifter::{level::dataset, level::edit, eval::evaluate, io::info, io::mesh, pipeline, learn::sparse, io::vdb};
 
 #[derive(Parser, Debug)]
 #[command(name = "shapeshifter", version, about = "3D shape variations from one exemplar mesh (ShapeShifter, CVPR 2025)")]
@@ -535,7 +535,7 @@ pub fn init_logging(cli: &Cli) {
 }
 
 fn device(spec: &str) -> Result<tch::Device> {
-    let (device, why) = sparse_conv::pick_device(spec).map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
+    let (device, why) = sparse::pick_device(spec).map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
     log::info!("device: {why}");
     Ok(device)
 }
@@ -644,7 +644,7 @@ struct MeshedSummary {
 /// its error on stderr) and, for several inputs, a summary. Exit status 1 when
 /// any input failed.
 fn finish_batch<T: serde::Serialize>(
-    report: &shapeshifter::batch::Report<T>,
+    report: &shapeshifter::pipeline::batch::Report<T>,
     what: &str,
     folder: Option<&std::path::Path>,
     json: bool,
@@ -715,7 +715,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Info { files, batch } => {
             let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
-            let report = shapeshifter::batch::run(&files, &names, batch.jobs, |f, _| {
+            let report = shapeshifter::pipeline::batch::run(&files, &names, batch.jobs, |f, _| {
                 info::inspect(f).map(|i| (None, i)).map_err(|e| e.to_string())
             });
             if batch.json {
@@ -745,9 +745,9 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             options.validate().map_err(shapeshifter::Error::from)?;
             let previews = preview.then(|| view.options());
             let write = vdb::WriteOptions { points, ..Default::default() };
-            let names = shapeshifter::batch::output_names(&meshes)?;
+            let names = shapeshifter::pipeline::batch::output_names(&meshes)?;
             let several = meshes.len() > 1;
-            let report = shapeshifter::batch::run(&meshes, &names, batch.jobs, |mesh_path, name| {
+            let report = shapeshifter::pipeline::batch::run(&meshes, &names, batch.jobs, |mesh_path, name| {
                 let dir = if several { output.join(name) } else { output.clone() };
                 let manifest =
                     pipeline::encode_file(mesh_path, &dir, &options, previews.as_ref(), write).map_err(|e| e.to_string())?;
@@ -908,8 +908,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             if several && preview.is_some() {
                 anyhow::bail!("--preview takes one input (several: run `render` on the meshes)");
             }
-            let names = shapeshifter::batch::output_names(&inputs)?;
-            let report = shapeshifter::batch::run(&inputs, &names, batch.jobs, |input, name| {
+            let names = shapeshifter::pipeline::batch::output_names(&inputs)?;
+            let report = shapeshifter::pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
                 let target = if several { output.join(format!("{name}.{ext}")) } else { output.clone() };
                 let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", input.display());
                 let (level, provenance) = vdb::read_level(input).map_err(|e| e.to_string())?;
@@ -936,8 +936,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Points { inputs, output, batch } => {
             let several = inputs.len() > 1;
-            let names = shapeshifter::batch::output_names(&inputs)?;
-            let report = shapeshifter::batch::run(&inputs, &names, batch.jobs, |input, name| {
+            let names = shapeshifter::pipeline::batch::output_names(&inputs)?;
+            let report = shapeshifter::pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
                 let target = if several { output.join(format!("{name}.ply")) } else { output.clone() };
                 let (level, _) = vdb::read_level(input).map_err(|e| e.to_string())?;
                 let p = pipeline::oriented_points(&level).map_err(|e| format!("{}: {e}", input.display()))?;
@@ -980,7 +980,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Slurm { meshes, output, n, seed, profile, overrides, partition, gpus_per_job, dry_run } => {
             let config = Config::load(&profile, &overrides)?;
-            let opts = shapeshifter::cluster::GraphOptions {
+            let opts = shapeshifter::pipeline::cluster::GraphOptions {
                 binary: std::env::current_exe()?,
                 profile,
                 overrides,
@@ -1007,8 +1007,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 } else {
                     output.clone()
                 };
-                let jobs = shapeshifter::cluster::job_graph(m, &out, &config, &opts)?;
-                let submit = shapeshifter::cluster::write_graph(&out.join("slurm"), &jobs)?;
+                let jobs = shapeshifter::pipeline::cluster::job_graph(m, &out, &config, &opts)?;
+                let submit = shapeshifter::pipeline::cluster::write_graph(&out.join("slurm"), &jobs)?;
                 if dry_run {
                     println!("{}: {} jobs written, submit with {}", m.display(), jobs.len(), submit.display());
                     continue;
@@ -1029,7 +1029,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Compare { a, b } => {
-            let report = shapeshifter::dataset::compare_levels(&a, &b)?;
+            let report = shapeshifter::level::dataset::compare_levels(&a, &b)?;
             println!("{} level files compared: {} identical", report.compared, report.compared - report.differences.len());
             for d in &report.differences {
                 println!("  differs: {d}");

@@ -45,12 +45,12 @@ pub struct OutputConfig {
     /// beside level_K.vdb: every client reads the volumes file), "embedded"
     /// (one file; pyopenvdb's readAll then fails on it) or "none".
     #[serde(default)]
-    pub points: crate::vdb::PointsLayout,
+    pub points: crate::io::vdb::PointsLayout,
 }
 
 impl OutputConfig {
-    pub fn write_options(&self) -> crate::vdb::WriteOptions {
-        crate::vdb::WriteOptions { points: self.points, ..Default::default() }
+    pub fn write_options(&self) -> crate::io::vdb::WriteOptions {
+        crate::io::vdb::WriteOptions { points: self.points, ..Default::default() }
     }
 }
 

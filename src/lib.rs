@@ -2,50 +2,38 @@
 //! (ShapeShifter, CVPR 2025), with every level of its sparse multiscale grids
 //! exchanged as OpenVDB files.
 //!
-//! Data flows one way: [`mesh`] -> `encode` -> [`level`] -> train -> sample ->
-//! mesh / [`vdb`]. Only [`vdb`] and [`mesh`] (and `recon`) talk to C++.
+//! Data flows one way, one folder per stage:
+//!
+//! ```text
+//! io::mesh ──> encode ──> level ──> learn::train ──> learn::sample ──> recon / io::vdb ──> eval, render
+//! ```
+//!
+//! - [`io`]: the only callers of C++ (the one cxx bridge): meshes through
+//!   OpenMesh, level files through OpenVDB, Poisson through CGAL; also the
+//!   formats written in Rust (OBJ reading, glTF binary) and `info`.
+//! - [`encode`]: an exemplar mesh into the multiscale levels.
+//! - [`level`]: one level as plain data, an encoded folder on disk, editing.
+//! - [`learn`]: the only users of tensors: sparse grids and convolution, the
+//!   networks, the diffusion schedule, checkpoints, training and sampling.
+//! - [`recon`]: oriented points into triangle meshes.
+//! - [`eval`]: quality measures, the `eval` command, the degradation ladder.
+//! - [`render`]: previews, contact sheets, `report.html`.
+//! - [`pipeline`]: the stages on whole folders, `run`, batches, cluster graphs.
+//! - [`geom`], [`util`]: helpers with one home each.
 
-pub mod batch;
-pub mod cluster;
 pub mod config;
-pub mod dataset;
-pub mod diffusion;
-pub mod edit;
 pub mod encode;
 pub mod error;
-pub mod evaluate;
-pub mod exemplar;
-pub mod grid;
-mod ffi;
-pub mod glb;
-pub mod info;
-pub mod ladder;
+pub mod eval;
+pub mod geom;
+pub mod io;
+pub mod learn;
 pub mod level;
-pub mod mesh;
-mod mesh_check;
-mod nearest;
-pub mod nn;
-mod obj;
 pub mod pipeline;
-pub mod metrics;
 pub mod recon;
 pub mod render;
-pub mod rng;
-pub mod sample;
-pub mod shapes;
-pub mod sparse_conv;
-pub mod train;
-pub mod vdb;
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;
+pub mod util;
 
 pub use error::{Error, Result};
-
-/// Tunes glibc's allocator for large tensors: by default it returns every big
-/// block to the OS, which made sparse convolution 1.5-3x slower on CPU
-/// (DESIGN.md). Call once at start-up.
-pub fn tune_allocator() {
-    // SAFETY: mallopt only changes allocator thresholds.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 30);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30);
-    }
-}

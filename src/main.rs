@@ -7,7 +7,7 @@ use clap::Parser;
 mod cli;
 
 fn main() -> ExitCode {
-    shapeshifter::tune_allocator();
+    shapeshifter::util::alloc::tune_allocator();
     let args = cli::Cli::parse();
     cli::init_logging(&args);
     match cli::run(args) {

@@ -8,7 +8,7 @@ mod hostile;
 use common::*;
 use hostile::sphere_level;
 use std::path::Path;
-use shapeshifter::{dataset, exemplar, mesh, vdb};
+use shapeshifter::{level::dataset, encode::exemplar, io::mesh, io::vdb};
 
 /// Writes the small demo tower as a PLY in `dir`.
 fn small_tower_ply(dir: &std::path::Path) -> std::path::PathBuf {
@@ -145,7 +145,7 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
 
 #[test]
 fn mesh_and_points_bad_levels_fail_cleanly_with_no_output() {
-    use shapeshifter::vdb::{write_level, Provenance, WriteOptions};
+    use shapeshifter::io::vdb::{write_level, Provenance, WriteOptions};
     let dir = tempfile::tempdir().unwrap();
     let write = |name: &str, level: &shapeshifter::level::Level| {
         let p = dir.path().join(name);
@@ -214,7 +214,7 @@ vdb.write(sys.argv[2], grids=grids)
 /// and the two flags together are refused.
 #[test]
 fn mesh_depth_is_a_grid_of_two_to_the_depth() {
-    use shapeshifter::vdb::{write_level, Provenance, WriteOptions};
+    use shapeshifter::io::vdb::{write_level, Provenance, WriteOptions};
     let dir = tempfile::tempdir().unwrap();
     let level = dir.path().join("sphere.vdb");
     write_level(&level, &sphere_level(2000), &Provenance::default(), WriteOptions::default()).unwrap();

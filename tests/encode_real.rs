@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use shapeshifter::encode::{encode, normalisation_frame, EncodeOptions, Pooling};
 use shapeshifter::level::Level;
-use shapeshifter::mesh::{self, Mesh};
+use shapeshifter::io::mesh::{self, Mesh};
 use glam::{DVec3, Vec3};
 
 /// `../shared/data/<rel>` from the project root, if present.
@@ -103,7 +103,7 @@ fn airplane_vertex_colours_land_on_the_points() {
         return;
     };
     let mesh = mesh::load(&path).expect("airplane loads");
-    let shapeshifter::mesh::MeshColours::PerVertex(vc) = &mesh.colours else { panic!("airplane has no vertex colours") };
+    let shapeshifter::io::mesh::MeshColours::PerVertex(vc) = &mesh.colours else { panic!("airplane has no vertex colours") };
     let options = EncodeOptions { sampling_resolution: 256, finest_resolution: 64, ..Default::default() };
     let (levels, _) = encode(&mesh, &options).unwrap();
     let fine = levels.last().unwrap();

@@ -9,8 +9,8 @@ use std::process::Command;
 use common::*;
 use glam::{DVec3, IVec3, Vec3};
 use shapeshifter::level::{Frame, Level};
-use shapeshifter::mesh::{self, Mesh, MeshColours};
-use shapeshifter::vdb::{self, Provenance, WriteOptions};
+use shapeshifter::io::mesh::{self, Mesh, MeshColours};
+use shapeshifter::io::vdb::{self, Provenance, WriteOptions};
 
 /// A deterministic pseudo-random level: a noisy shell of voxels with every
 /// feature varied, placed in a non-trivial exemplar frame.
@@ -210,7 +210,7 @@ fn ply_round_trip_keeps_vertex_colours_binary_and_ascii() {
 #[test]
 fn demo_tower_round_trips_through_ply() {
     let dir = tmp();
-    let m = shapeshifter::exemplar::small_tower();
+    let m = shapeshifter::encode::exemplar::small_tower();
     let path = dir.path().join("tower.ply");
     mesh::save(&m, &path, true).unwrap();
     let back = mesh::load(&path).unwrap();
@@ -317,7 +317,7 @@ fn truncated_and_corrupt_meshes() {
     let dir = tmp();
     let d = dir.path();
     let good = d.join("good.ply");
-    mesh::save(&shapeshifter::exemplar::small_tower(), &good, true).unwrap();
+    mesh::save(&shapeshifter::encode::exemplar::small_tower(), &good, true).unwrap();
     let bytes = std::fs::read(&good).unwrap();
     std::fs::write(d.join("truncated.ply"), &bytes[..bytes.len() / 3]).unwrap();
     assert_clean_failure(&shapeshifter(&["info", d.join("truncated.ply").to_str().unwrap()]), "truncated.ply", "");

@@ -7,8 +7,8 @@ mod common;
 
 use common::*;
 use shapeshifter::config::Config;
-use shapeshifter::ladder::Rung;
-use shapeshifter::{exemplar, pipeline};
+use shapeshifter::eval::ladder::Rung;
+use shapeshifter::{encode::exemplar, pipeline};
 
 /// The demo exemplar encoded as `run` encodes it with the cpu profile.
 fn encoded_demo(dir: &std::path::Path) -> (std::path::PathBuf, Config) {

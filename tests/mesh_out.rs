@@ -9,8 +9,8 @@ mod hostile;
 use common::*;
 use glam::Vec3;
 use shapeshifter::config::MeshConfig;
-use shapeshifter::mesh::{self, DecimateOptions, Mesh, MeshColours};
-use shapeshifter::{metrics, shapes};
+use shapeshifter::io::mesh::{self, DecimateOptions, Mesh, MeshColours};
+use shapeshifter::{eval::metrics, testing::shapes};
 
 const RED: Vec3 = Vec3::new(1.0, 0.0, 0.0);
 const BLUE: Vec3 = Vec3::new(0.1, 0.2, 0.9);
@@ -159,10 +159,10 @@ fn glb_reads_back_through_the_gltf_crate() {
     // COLOR_0 is linear: red stays (1, 0, 0), the blue is sRGB-decoded.
     let read: Vec<Vec3> = reader.read_colors(0).unwrap().into_rgb_f32().map(Vec3::from).collect();
     for (got, want) in read.iter().zip(colours(&sphere)) {
-        let linear = Vec3::from_array(want.to_array().map(shapeshifter::glb::srgb_to_linear));
+        let linear = Vec3::from_array(want.to_array().map(shapeshifter::io::glb::srgb_to_linear));
         assert!((*got - linear).abs().max_element() < 1e-6, "{got} vs {linear}");
     }
-    assert!((shapeshifter::glb::srgb_to_linear(0.5) - 0.2140).abs() < 1e-3);
+    assert!((shapeshifter::io::glb::srgb_to_linear(0.5) - 0.2140).abs() < 1e-3);
     let indices: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
     assert_eq!(indices, sphere.triangles.iter().flatten().copied().collect::<Vec<_>>());
     // A mesh without colours has no COLOR_0.
@@ -177,7 +177,7 @@ fn glb_reads_back_through_the_gltf_crate() {
 
 #[test]
 fn mesh_command_writes_light_glb_and_ply_and_refuses_bad_requests_cleanly() {
-    use shapeshifter::vdb::{write_level, Provenance, WriteOptions};
+    use shapeshifter::io::vdb::{write_level, Provenance, WriteOptions};
     let dir = tempfile::tempdir().unwrap();
     let level = dir.path().join("sphere.vdb");
     write_level(&level, &hostile::sphere_level(2000), &Provenance::default(), WriteOptions::default()).unwrap();
@@ -219,7 +219,7 @@ fn mesh_command_writes_light_glb_and_ply_and_refuses_bad_requests_cleanly() {
 
 #[test]
 fn mesh_stage_writes_light_ply_and_glb_as_configured() {
-    use shapeshifter::vdb::{write_level, Provenance, WriteOptions};
+    use shapeshifter::io::vdb::{write_level, Provenance, WriteOptions};
     let dir = tempfile::tempdir().unwrap();
     let variant = dir.path().join("variant_000");
     std::fs::create_dir(&variant).unwrap();

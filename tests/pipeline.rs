@@ -5,10 +5,11 @@ use glam::{DVec3, IVec3};
 use tch::{Device, Kind, Tensor};
 use shapeshifter::config::Config;
 use shapeshifter::level::Level;
-use shapeshifter::nn::{new_diffusion, new_upsampler};
-use shapeshifter::sample::{level0_box, load_models, sample, SampleOptions};
-use shapeshifter::sparse_conv::SparseTensor;
-use shapeshifter::train::{state_path, synthetic::sphere_levels, train_level, train_level_with, TrainState};
+use shapeshifter::learn::nn::{new_diffusion, new_upsampler};
+use shapeshifter::learn::sample::{level0_box, load_models, sample, SampleOptions};
+use shapeshifter::learn::sparse::SparseTensor;
+use shapeshifter::testing::synthetic::sphere_levels;
+use shapeshifter::learn::train::{state_path, train_level, train_level_with, TrainState};
 
 /// libtorch's CPU kernels are bitwise reproducible only when one thread at a time
 /// runs them (concurrent callers share the intra-op pool and split work

@@ -1,5 +1,5 @@
 //! A uniform hash grid over points for radius queries (nearest-point queries
-//! are `crate::nearest`'s: they must stay fast far from the points, where the
+//! are `crate::geom::nearest`'s: they must stay fast far from the points, where the
 //! Poisson surface of an open sheet wraps around it at many cells' distance).
 //!
 //! Points are sorted by cell so that every occupied cell is one contiguous run

@@ -1,5 +1,6 @@
 use super::*;
 use glam::Vec3;
+use crate::io::poisson::{self, PoissonParams};
 
 /// One point per voxel of size `vs` that the surface crosses (|sdf| at the
 /// centre below vs/2), moved onto the surface, like the finest level of an
@@ -74,7 +75,7 @@ fn patch() -> OrientedPoints {
 }
 
 fn signed_volume(m: &ReconMesh) -> f32 {
-    crate::shapes::signed_volume(&m.positions, &m.triangles)
+    crate::testing::shapes::signed_volume(&m.positions, &m.triangles)
 }
 
 /// Largest distance from an input point to the nearest mesh vertex.
@@ -162,16 +163,6 @@ fn apss_patch_stays_open_without_skirt() {
 }
 
 #[test]
-fn poisson_cgal_mesher_sphere_is_closed_and_close() {
-    let pts = sphere();
-    let opts = PoissonOptions { mesher: PoissonMesher::Cgal, sm_radius: 1.0, ..Default::default() };
-    let (m, report) = poisson_report(&pts, &opts).unwrap();
-    eprintln!("{} points: {report:?}", pts.positions.len());
-    check_sphere(&m, &pts, "poisson (CGAL mesher)");
-    check_colours(&m, "poisson (CGAL mesher)");
-}
-
-#[test]
 fn errors_for_bad_input() {
     let p = PoissonOptions::default();
     let a = ApssOptions::default();
@@ -194,31 +185,23 @@ fn errors_for_bad_input() {
         assert!(matches!(run(&nan_normal), Err(ReconError::NonFinite { index: 3, what: "normal" })), "{method}");
         assert!(matches!(run(&short_colours), Err(ReconError::LengthMismatch { what: "colours", .. })), "{method}");
     }
-    let bad = PoissonOptions { sm_angle: 45.0, ..Default::default() };
+    let bad = PoissonOptions { resolution: 1, ..Default::default() };
     assert!(matches!(poisson(&sphere(), &bad), Err(ReconError::InvalidOption(_))));
 }
 
 #[test]
 fn cxx_errors_become_failed() {
     // Past Rust's own checks, the C++ side still refuses bad input with a message.
-    let params = bridge::PoissonParams {
-        spacing: 0.0,
-        sm_angle: 20.0,
-        sm_radius: 30.0,
-        sm_distance: 0.375,
-        solver_tolerance: 1e-6,
-        solver_max_iterations: 0,
-        grid_cell: 0.0,
-    };
-    let e = bridge::poisson_reconstruct(&[0.0; 9], &[0.0; 6], &params).unwrap_err();
-    assert!(e.what().contains("normals"), "{}", e.what());
-    let e = bridge::poisson_grid(&[0.0, 0.0, f32::NAN], &[0.0, 0.0, 1.0], &params).unwrap_err();
-    assert!(e.what().contains("grid_cell"), "{}", e.what());
-    let params = bridge::PoissonParams { grid_cell: 0.1, ..params };
-    let e = bridge::poisson_grid(&[0.0, 0.0, f32::NAN], &[0.0, 0.0, 1.0], &params).unwrap_err();
-    assert!(e.what().contains("non-finite"), "{}", e.what());
-    let e = bridge::poisson_grid(&[0.0; 30], &[0.0; 30], &params).unwrap_err();
-    assert!(e.what().contains("too few"), "{}", e.what());
+    let params = poisson::PoissonParams { spacing: 0.0, solver_tolerance: 1e-6, solver_max_iterations: 0, grid_cell: 0.0 };
+    let e = poisson::sample_grid(&[0.0; 9], &[0.0; 6], &PoissonParams { grid_cell: 0.1, ..params.clone() }).unwrap_err();
+    assert!(e.contains("normals"), "{e}");
+    let e = poisson::sample_grid(&[0.0, 0.0, f32::NAN], &[0.0, 0.0, 1.0], &params).unwrap_err();
+    assert!(e.contains("grid_cell"), "{e}");
+    let params = PoissonParams { grid_cell: 0.1, ..params };
+    let e = poisson::sample_grid(&[0.0, 0.0, f32::NAN], &[0.0, 0.0, 1.0], &params).unwrap_err();
+    assert!(e.contains("non-finite"), "{e}");
+    let e = poisson::sample_grid(&[0.0; 30], &[0.0; 30], &params).unwrap_err();
+    assert!(e.contains("too few"), "{e}");
 }
 
 #[test]

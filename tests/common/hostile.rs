@@ -25,7 +25,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use glam::{IVec3, Vec2, Vec3};
-use shapeshifter::rng::Rng;
+use shapeshifter::util::rng::Rng;
 
 /// The memory bound every run must keep: peak RSS at most the binary's own
 /// peak on the same, intact input (plus 64 MiB of slack for the allocator and
@@ -58,22 +58,22 @@ fn args(a: &[&str]) -> Vec<String> {
 }
 
 /// A small sphere (a few hundred triangles) with vertex colours.
-pub fn small_sphere() -> shapeshifter::mesh::Mesh {
-    let mut m = shapeshifter::shapes::uv_sphere(Vec3::ZERO, 10, 14, |th, ph| 1.0 + 0.2 * (3.0 * ph).sin() * th.sin());
+pub fn small_sphere() -> shapeshifter::io::mesh::Mesh {
+    let mut m = shapeshifter::testing::shapes::uv_sphere(Vec3::ZERO, 10, 14, |th, ph| 1.0 + 0.2 * (3.0 * ph).sin() * th.sin());
     let colours = m.positions.iter().map(|p| (*p * 0.4 + 0.5).clamp(Vec3::ZERO, Vec3::ONE)).collect();
-    m.colours = shapeshifter::mesh::MeshColours::PerVertex(colours);
+    m.colours = shapeshifter::io::mesh::MeshColours::PerVertex(colours);
     m
 }
 
-fn saved(mesh: &shapeshifter::mesh::Mesh, dir: &Path, name: &str, binary: bool) -> Vec<u8> {
+fn saved(mesh: &shapeshifter::io::mesh::Mesh, dir: &Path, name: &str, binary: bool) -> Vec<u8> {
     let p = dir.join(name);
-    shapeshifter::mesh::save(mesh, &p, binary).expect("seed mesh writes");
+    shapeshifter::io::mesh::save(mesh, &p, binary).expect("seed mesh writes");
     std::fs::read(&p).expect("seed mesh reads back")
 }
 
 /// An OBJ with UVs, two materials (one textured, one with a Kd colour), its
 /// MTL and an 8x8 PNG texture: every part of the OBJ reader's path.
-pub fn textured_obj(mesh: &shapeshifter::mesh::Mesh) -> Vec<(String, Vec<u8>)> {
+pub fn textured_obj(mesh: &shapeshifter::io::mesh::Mesh) -> Vec<(String, Vec<u8>)> {
     let mut obj = String::from("# shapeshifter hostile-input seed\nmtllib seed.mtl\no sphere\n");
     for p in &mesh.positions {
         obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
@@ -135,11 +135,11 @@ pub fn builtin_seeds(scratch: &Path) -> Vec<Seed> {
         Seed { format: "stl-ascii".into(), files: vec![("seed.stl".into(), saved(&sphere, scratch, "a.stl", false))], mutable: vec![0], commands: info },
     ];
     let level_path = scratch.join("level_1.vdb");
-    shapeshifter::vdb::write_level(
+    shapeshifter::io::vdb::write_level(
         &level_path,
         &sphere_level(1500),
-        &shapeshifter::vdb::Provenance::default(),
-        shapeshifter::vdb::WriteOptions::default(),
+        &shapeshifter::io::vdb::Provenance::default(),
+        shapeshifter::io::vdb::WriteOptions::default(),
     )
     .expect("seed level writes");
     seeds.push(level_seed(std::fs::read(&level_path).expect("seed level reads back")));

@@ -1,0 +1,450 @@
+//! @brief The degradation ladder: the exemplar's finest level degraded in
+//! known ways, as level folders like variants, so that every quality measure
+//! can be checked against what a person sees (a measure that rates a blurred,
+//! washed-out or blob-like shape near-perfect is a defect).
+//!
+//! Rungs (each a folder `OUT/<rung>/level_K.vdb`, the exemplar's coarser
+//! levels kept, the finest replaced):
+//! - `exemplar`: the finest level itself (the top: every measure at its best);
+//! - `smooth_weak`, `smooth_strong`: geometry smoothed (Laplacian smoothing of
+//!   the surface points and normals over the 26-neighbourhood, 2 and 8
+//!   iterations, then re-binned into voxels); colours kept;
+//! - `washed_out`: every colour replaced by the mean colour;
+//! - `shuffled_colours`: the colours permuted among the surface voxels (the
+//!   same histogram, no stones);
+//! - `blob`: level 0 upsampled to the finest resolution by trilinear
+//!   interpolation of its planes, normals and colours, no detail added;
+//! - `untrained`: freshly initialised networks sampled through the method
+//!   (needs a configuration: the models folder's, or a profile).
+//!
+//! [`expectations`] says which rungs each measure must rank below the
+//! exemplar, by what margin, and [`check`] tests them on an evaluation.
+
+use std::path::Path;
+
+use glam::{IVec3, Vec3};
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::level::Level;
+use crate::eval::metrics::VariantScores;
+use crate::util::rng::Rng;
+
+/// One rung of the ladder.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Rung {
+    Exemplar,
+    SmoothWeak,
+    SmoothStrong,
+    WashedOut,
+    ShuffledColours,
+    Blob,
+    Untrained,
+}
+
+impl Rung {
+    pub const ALL: [Rung; 7] = [
+        Rung::Exemplar,
+        Rung::SmoothWeak,
+        Rung::SmoothStrong,
+        Rung::WashedOut,
+        Rung::ShuffledColours,
+        Rung::Blob,
+        Rung::Untrained,
+    ];
+
+    /// Folder name, and the name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Rung::Exemplar => "exemplar",
+            Rung::SmoothWeak => "smooth_weak",
+            Rung::SmoothStrong => "smooth_strong",
+            Rung::WashedOut => "washed_out",
+            Rung::ShuffledColours => "shuffled_colours",
+            Rung::Blob => "blob",
+            Rung::Untrained => "untrained",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Rung> {
+        Rung::ALL.into_iter().find(|r| r.name() == name)
+    }
+}
+
+/// How strongly each rung degrades.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct LadderOptions {
+    /// Laplacian iterations of `smooth_weak` and `smooth_strong`.
+    pub smooth_weak_iterations: usize,
+    pub smooth_strong_iterations: usize,
+    /// The level the blob is upsampled from (0 = coarsest).
+    pub blob_level: usize,
+    /// Seed of the colour shuffle.
+    pub seed: u64,
+}
+
+impl Default for LadderOptions {
+    fn default() -> Self {
+        LadderOptions { smooth_weak_iterations: 2, smooth_strong_iterations: 8, blob_level: 0, seed: 17 }
+    }
+}
+
+/// The rungs that need no networks, each as the exemplar's levels with the
+/// finest one replaced (coarsest first).
+pub fn degrade(levels: &[Level], opts: &LadderOptions) -> Result<Vec<(Rung, Vec<Level>)>> {
+    let finest = levels.last().ok_or_else(|| Error::Invalid("the exemplar has no levels".into()))?;
+    if finest.is_empty() {
+        return Err(Error::Invalid("the exemplar's finest level has no voxels".into()));
+    }
+    let blob_source = levels
+        .get(opts.blob_level)
+        .ok_or_else(|| Error::Invalid(format!("blob level {} does not exist", opts.blob_level)))?;
+    let with_finest = |l: Level| {
+        let mut v = levels[..levels.len() - 1].to_vec();
+        v.push(l);
+        v
+    };
+    Ok(vec![
+        (Rung::Exemplar, levels.to_vec()),
+        (Rung::SmoothWeak, with_finest(smooth(finest, opts.smooth_weak_iterations))),
+        (Rung::SmoothStrong, with_finest(smooth(finest, opts.smooth_strong_iterations))),
+        (Rung::WashedOut, with_finest(washed_out(finest))),
+        (Rung::ShuffledColours, with_finest(shuffled(finest, opts.seed))),
+        (Rung::Blob, with_finest(blob(blob_source, finest))),
+    ])
+}
+
+fn active(level: &Level) -> Vec<usize> {
+    (0..level.len()).filter(|&i| level.mask[i] > 0.0).collect()
+}
+
+/// Surface point of voxel `i` in voxel units of its level (voxel `c` spans
+/// `[c, c+1)`).
+fn point_voxels(level: &Level, i: usize) -> Vec3 {
+    level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i]
+}
+
+/// Points (voxel units), normals and colours binned into the voxels that
+/// contain the points; voxels that receive several are averaged.
+fn rebin(template: &Level, points: &[Vec3], normals: &[Vec3], colours: &[Vec3]) -> Level {
+    let mut bins: std::collections::BTreeMap<(i32, i32, i32), (Vec3, Vec3, Vec3, u32)> = Default::default();
+    for ((&p, &n), &c) in points.iter().zip(normals).zip(colours) {
+        if !p.is_finite() {
+            continue;
+        }
+        let v = p.floor().as_ivec3();
+        let e = bins.entry((v.z, v.y, v.x)).or_insert((Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0));
+        e.0 += p;
+        e.1 += n;
+        e.2 += c;
+        e.3 += 1;
+    }
+    let res = template.resolution as i32;
+    let mut out = Level { index: template.index, resolution: template.resolution, frame: template.frame, ..Default::default() };
+    for ((z, y, x), (p, n, c, k)) in bins {
+        let coord = IVec3::new(x, y, z);
+        if coord.min_element() < 0 || coord.max_element() >= res {
+            continue;
+        }
+        let k = k as f32;
+        out.coords.push(coord);
+        out.offsets.push((p / k - coord.as_vec3() - Vec3::splat(0.5)).clamp(Vec3::splat(-0.5), Vec3::splat(0.5)));
+        out.normals.push((n / k).try_normalize().unwrap_or(Vec3::Y));
+        out.colours.push(c / k);
+        out.mask.push(1.0);
+    }
+    out
+}
+
+/// Laplacian smoothing of the active voxels' surface points and normals:
+/// each iteration replaces both by their mean over the voxel and its active
+/// 26-neighbours on the same side of the surface (original normals less than
+/// 90 degrees apart); then the points
+/// are binned into voxels again. Each iteration blurs by about one voxel.
+pub fn smooth(level: &Level, iterations: usize) -> Level {
+    let act = active(level);
+    let index: std::collections::HashMap<IVec3, usize> = act.iter().enumerate().map(|(k, &i)| (level.coords[i], k)).collect();
+    let neighbours: Vec<Vec<usize>> = act
+        .par_iter()
+        .map(|&i| {
+            let c = level.coords[i];
+            let mut v = Vec::with_capacity(27);
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        // Only the same side of the surface: the two faces of
+                        // a wall thinner than a voxel or two must not merge.
+                        if let Some(&k) = index.get(&(c + IVec3::new(dx, dy, dz))) {
+                            if level.normals[act[k]].dot(level.normals[i]) > 0.0 {
+                                v.push(k);
+                            }
+                        }
+                    }
+                }
+            }
+            v
+        })
+        .collect();
+    let mut points: Vec<Vec3> = act.iter().map(|&i| point_voxels(level, i)).collect();
+    let mut normals: Vec<Vec3> = act.iter().map(|&i| level.normals[i]).collect();
+    for _ in 0..iterations {
+        let next: Vec<(Vec3, Vec3)> = neighbours
+            .par_iter()
+            .map(|nb| {
+                let k = nb.len() as f32;
+                let p = nb.iter().fold(Vec3::ZERO, |a, &j| a + points[j]) / k;
+                let n = nb.iter().fold(Vec3::ZERO, |a, &j| a + normals[j]);
+                (p, n.try_normalize().unwrap_or(Vec3::Y))
+            })
+            .collect();
+        (points, normals) = next.into_iter().unzip();
+    }
+    let colours: Vec<Vec3> = act.iter().map(|&i| level.colours[i]).collect();
+    rebin(level, &points, &normals, &colours)
+}
+
+/// Every active voxel's colour replaced by the mean colour.
+pub fn washed_out(level: &Level) -> Level {
+    let act = active(level);
+    let mean = act.iter().fold(Vec3::ZERO, |a, &i| a + level.colours[i]) / act.len().max(1) as f32;
+    let mut out = level.clone();
+    for &i in &act {
+        out.colours[i] = mean;
+    }
+    out
+}
+
+/// The active voxels' colours permuted among them (seeded Fisher-Yates).
+pub fn shuffled(level: &Level, seed: u64) -> Level {
+    let act = active(level);
+    let mut colours: Vec<Vec3> = act.iter().map(|&i| level.colours[i]).collect();
+    let mut rng = Rng::new(seed);
+    for i in (1..colours.len()).rev() {
+        colours.swap(i, rng.below(i + 1));
+    }
+    let mut out = level.clone();
+    for (&i, c) in act.iter().zip(colours) {
+        out.colours[i] = c;
+    }
+    out
+}
+
+/// `coarse` upsampled to `fine`'s resolution with no detail added: at each
+/// child voxel centre x of an active coarse voxel, the signed distances to the
+/// tangent planes of the 8 nearest coarse voxels (`n . (x - p)`), their normals
+/// and colours are blended with trilinear weights (over the active ones); the
+/// child is kept when the blended plane passes through it, its surface point
+/// is x moved onto that plane.
+pub fn blob(coarse: &Level, fine: &Level) -> Level {
+    let factor = (fine.resolution / coarse.resolution.max(1)).max(1) as i32;
+    let f = factor as f32;
+    let act = active(coarse);
+    let index: std::collections::HashMap<IVec3, usize> = act.iter().map(|&i| (coarse.coords[i], i)).collect();
+    let children: Vec<(IVec3, Vec3, Vec3, Vec3)> = act
+        .par_iter()
+        .flat_map_iter(|&i| {
+            let base = coarse.coords[i] * factor;
+            let index = &index;
+            (0..factor * factor * factor).filter_map(move |k| {
+                let child = base + IVec3::new(k % factor, (k / factor) % factor, k / (factor * factor));
+                // Child centre in coarse voxel units.
+                let x = (child.as_vec3() + Vec3::splat(0.5)) / f;
+                let g = x - Vec3::splat(0.5);
+                let b = g.floor();
+                let t = g - b;
+                let (mut w_sum, mut d, mut n, mut c) = (0.0f32, 0.0f32, Vec3::ZERO, Vec3::ZERO);
+                for corner in 0..8 {
+                    let o = IVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+                    let Some(&j) = index.get(&(b.as_ivec3() + o)) else { continue };
+                    let w = [0, 1, 2].iter().map(|&a| if o[a] == 1 { t[a] } else { 1.0 - t[a] }).product::<f32>();
+                    let nj = coarse.normals[j].normalize_or_zero();
+                    d += w * nj.dot(x - point_voxels(coarse, j));
+                    n += w * nj;
+                    c += w * coarse.colours[j];
+                    w_sum += w;
+                }
+                if w_sum < 1e-3 {
+                    return None;
+                }
+                let (d, n, c) = (d / w_sum * f, n.try_normalize()?, c / w_sum);
+                // The plane crosses the child voxel (half-extent along n).
+                (d.abs() <= 0.5 * n.abs().element_sum()).then(|| {
+                    let p = child.as_vec3() + Vec3::splat(0.5) - d * n;
+                    (child, p, n, c)
+                })
+            })
+        })
+        .collect();
+    let points: Vec<Vec3> = children.iter().map(|c| c.1.clamp(c.0.as_vec3(), c.0.as_vec3() + Vec3::splat(0.999))).collect();
+    let normals: Vec<Vec3> = children.iter().map(|c| c.2).collect();
+    let colours: Vec<Vec3> = children.iter().map(|c| c.3).collect();
+    rebin(fine, &points, &normals, &colours)
+}
+
+/// Which measure must rank which rungs below the exemplar, and by how much.
+pub struct Expectation {
+    /// Name as in reports (JSON path of the figure).
+    pub metric: &'static str,
+    pub value: fn(&VariantScores) -> f64,
+    /// True when larger values are better.
+    pub higher_is_better: bool,
+    /// The least difference from the exemplar's value that counts as "clearly
+    /// worse" (the figure's own units), given the exemplar's own scores.
+    pub margin: fn(&VariantScores) -> f64,
+    /// Rungs that must be clearly worse than the exemplar.
+    pub worse: &'static [Rung],
+    /// Whether `smooth_weak` must also lie between the exemplar and
+    /// `smooth_strong` (the degradation grows with the smoothing).
+    pub graded: bool,
+    /// Colour measures: not applicable to a one-colour exemplar.
+    pub colour: bool,
+}
+
+const GEOMETRY_RUNGS: &[Rung] = &[Rung::SmoothWeak, Rung::SmoothStrong, Rung::Blob, Rung::Untrained];
+
+/// The measures and the rungs each must fail. Precision (the literature's LP
+/// scores) is expected to fail only noise: a smoothed or blob-like shape's
+/// patches all exist somewhere on the exemplar, which is why coverage exists.
+pub fn expectations() -> Vec<Expectation> {
+    use Rung::*;
+    let e = |metric, value, higher_is_better, margin, worse, graded, colour| Expectation {
+        metric,
+        value,
+        higher_is_better,
+        margin,
+        worse,
+        graded,
+        colour,
+    };
+        // Fractions in [0, 1]: 0.05 (0.1 for colour, whose self-score is ~0.94).
+        let (m05, m10): (fn(&VariantScores) -> f64, fn(&VariantScores) -> f64) = (|_| 0.05, |_| 0.1);
+        // Degrees: a tenth of the exemplar's own RMS neighbour angle, so a
+        // gentle terrain and a rough wall are held to the same relative standard.
+        let tenth_rms: fn(&VariantScores) -> f64 = |ex| 0.1 * ex.detail.rms_deg;
+        vec![
+        e("lp_iou", |v: &VariantScores| v.lp_iou, true, m05, &[Untrained], false, false),
+        e("coverage.lp_iou", |v: &VariantScores| v.coverage.lp_iou, true, m05, GEOMETRY_RUNGS, true, false),
+        e("coverage.lp_iou_above", |v: &VariantScores| v.coverage.lp_iou_above, true, m05, GEOMETRY_RUNGS, false, false),
+        e("coverage_22.lp_iou", |v: &VariantScores| v.coverage_22.lp_iou, true, m05, GEOMETRY_RUNGS, true, false),
+        e("detail.w1_deg", |v: &VariantScores| v.detail.w1_deg, false, tenth_rms, GEOMETRY_RUNGS, true, false),
+        e("detail.rms_ratio (distance from 1)", |v: &VariantScores| (v.detail.rms_ratio - 1.0).abs(), false, m05, GEOMETRY_RUNGS, true, false),
+        e("colour.fscore", |v: &VariantScores| v.colour.fscore, true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
+        e("colour.precision", |v: &VariantScores| v.colour.precision, true, m10, &[WashedOut, ShuffledColours, Untrained], false, true),
+        e("colour.coverage", |v: &VariantScores| v.colour.coverage, true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
+    ]
+}
+
+/// The outcome of one expectation on one rung.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CheckResult {
+    pub metric: String,
+    pub rung: String,
+    pub exemplar: f64,
+    pub value: f64,
+    /// "worse than the exemplar by >= margin", or "between exemplar and smooth_strong".
+    pub requirement: String,
+    pub ok: bool,
+}
+
+/// Tests every expectation on the scored rungs (`rows` named by
+/// [`Rung::name`]; absent rungs are skipped). `colourful`: whether the exemplar
+/// has colours to lose (a one-colour exemplar cannot fail the colour rungs).
+pub fn check(rows: &[VariantScores], colourful: bool) -> Vec<CheckResult> {
+    let get = |r: Rung| rows.iter().find(|v| v.name == r.name());
+    let Some(top) = get(Rung::Exemplar) else { return Vec::new() };
+    let mut out = Vec::new();
+    for e in expectations() {
+        if e.colour && !colourful {
+            continue;
+        }
+        let ex = (e.value)(top);
+        let margin = (e.margin)(top);
+        // Positive = worse than the exemplar.
+        let worse_by = |v: f64| if e.higher_is_better { ex - v } else { v - ex };
+        for &r in e.worse {
+            if let Some(row) = get(r) {
+                let v = (e.value)(row);
+                out.push(CheckResult {
+                    metric: e.metric.into(),
+                    rung: r.name().into(),
+                    exemplar: ex,
+                    value: v,
+                    requirement: format!("worse than the exemplar by >= {margin:.4}"),
+                    ok: worse_by(v) >= margin,
+                });
+            }
+        }
+        if e.graded {
+            if let (Some(weak), Some(strong)) = (get(Rung::SmoothWeak), get(Rung::SmoothStrong)) {
+                let (w, s) = ((e.value)(weak), (e.value)(strong));
+                out.push(CheckResult {
+                    metric: e.metric.into(),
+                    rung: Rung::SmoothWeak.name().into(),
+                    exemplar: ex,
+                    value: w,
+                    requirement: format!("between the exemplar and smooth_strong ({s:.4})"),
+                    ok: worse_by(w) > 0.0 && worse_by(s) > worse_by(w),
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Writes each rung's levels into `out/<rung>/` (level files only).
+pub fn write_rungs(out: &Path, rungs: &[(Rung, Vec<Level>)], provenance: &crate::io::vdb::Provenance) -> Result<()> {
+    for (rung, levels) in rungs {
+        crate::pipeline::write_variant(&out.join(rung.name()), levels, provenance, false, Default::default())?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sphere's voxel shell at `res` (points on the sphere, radial normals,
+    /// colours varying with the normal).
+    fn sphere_level(res: u32, radius: f32) -> Level {
+        crate::testing::synthetic::sphere_levels(&[res], glam::DVec3::ZERO, radius as f64).remove(0)
+    }
+
+    #[test]
+    fn colour_rungs_keep_geometry_and_change_colour() {
+        let l = sphere_level(32, 0.7);
+        let w = washed_out(&l);
+        let s = shuffled(&l, 1);
+        assert_eq!(w.coords, l.coords);
+        assert_eq!(s.coords, l.coords);
+        assert!(w.colours.windows(2).all(|p| p[0] == p[1]));
+        // A shuffle keeps the histogram exactly: the same colours, reordered.
+        let sorted = |v: &[Vec3]| {
+            let mut k: Vec<[u32; 3]> = v.iter().map(|c| c.to_array().map(f32::to_bits)).collect();
+            k.sort_unstable();
+            k
+        };
+        assert_eq!(sorted(&s.colours), sorted(&l.colours), "a shuffle keeps the histogram");
+        assert_ne!(s.colours, l.colours);
+    }
+
+    #[test]
+    fn smoothing_keeps_a_sphere_and_blob_rebuilds_one_from_its_coarse_level() {
+        let fine = sphere_level(64, 0.7);
+        let sm = smooth(&fine, 4);
+        // Tangential drift merges the 1-2 voxel thick shell into fewer voxels.
+        assert!(sm.len() as f64 > 0.6 * fine.len() as f64, "{} of {}", sm.len(), fine.len());
+        for i in 0..sm.len() {
+            let p = (sm.coords[i].as_vec3() + Vec3::splat(0.5) + sm.offsets[i]) * (2.0 / 64.0) - Vec3::ONE;
+            // Laplacian smoothing shrinks a sphere a little, never by much here.
+            assert!((p.length() - 0.7).abs() < 0.05, "{p}");
+        }
+        let coarse = sphere_level(16, 0.7);
+        let b = blob(&coarse, &fine);
+        assert!(b.len() as f64 > 0.7 * fine.len() as f64 && (b.len() as f64) < 1.6 * fine.len() as f64, "{} vs {}", b.len(), fine.len());
+        for i in 0..b.len() {
+            let p = (b.coords[i].as_vec3() + Vec3::splat(0.5) + b.offsets[i]) * (2.0 / 64.0) - Vec3::ONE;
+            assert!((p.length() - 0.7).abs() < 0.06, "{p}");
+        }
+    }
+}

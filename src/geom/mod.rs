@@ -1,0 +1,3 @@
+//! Geometry shared by several stages.
+
+pub mod nearest;

@@ -1,0 +1,217 @@
+//! Level files: one `.vdb` per level, as DESIGN.md "Files that leave the
+//! program" says, through the OpenVDB shims of the bridge.
+//!
+//! Grids: `mask`, `density` (fog volume, 1 on surface voxels), `P` (world
+//! position), `N`, `Cd`, and the PointDataGrid `points` (P, N, Cd). All share a
+//! linear transform in the exemplar's own frame and units; our metadata is on
+//! every grid under `shapeshifter_*` keys plus `creator`.
+//!
+//! The point grid goes, by default, in a file of its own beside the volumes
+//! (`level_K.points.vdb` beside `level_K.vdb`, [`PointsLayout`]): Debian's
+//! pyopenvdb cannot read a PointDataGrid, and its `readAll` fails on a whole
+//! file that holds one; Houdini opens either file, Blender imports the volumes.
+
+use std::path::Path;
+
+use glam::{DVec3, IVec3, Vec3};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{check_input_file, write_atomically, Error, Result};
+use crate::io::ffi::bridge::{self, GridSummary, LevelData, MetaEntry, MetaKind};
+use crate::level::{Frame, Level};
+
+/// Where a level came from, recorded in its file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Provenance {
+    /// Stem of the exemplar mesh's file name.
+    pub exemplar: String,
+    /// Seed of the sampling run that made the level, if any.
+    pub seed: Option<u64>,
+    /// Digest of the configuration that made the level ("" for encoding).
+    pub config_digest: String,
+    /// The exemplar was an open surface (boundary edges): meshing picks APSS.
+    pub exemplar_open: bool,
+}
+
+/// Where the PointDataGrid `points` of a level goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum PointsLayout {
+    /// In its own file, [`points_path`] of the level file: every client reads
+    /// the volumes file (pyopenvdb's `readAll` included).
+    #[default]
+    Separate,
+    /// In the level file with the volumes (one file per level; pyopenvdb's
+    /// `readAll` then fails on it).
+    Embedded,
+    /// Not written (the volumes hold everything the program reads back).
+    None,
+}
+
+/// Options for writing level files.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WriteOptions {
+    /// Store floats as 16-bit halves: smaller files, lossy (about 1e-3 relative).
+    pub half_floats: bool,
+    pub points: PointsLayout,
+}
+
+/// The points file of a level file: `level_3.vdb` -> `level_3.points.vdb`.
+pub fn points_path(level_path: &Path) -> std::path::PathBuf {
+    let stem = level_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    level_path.with_file_name(format!("{stem}.points.vdb"))
+}
+
+/// Whether a file name is a points file written beside a level file.
+pub fn is_points_file(name: &str) -> bool {
+    name.ends_with(".points.vdb")
+}
+
+pub const CREATOR: &str = concat!("shapeshifter ", env!("CARGO_PKG_VERSION"));
+
+fn meta_str(key: &str, text: &str) -> MetaEntry {
+    MetaEntry { key: key.into(), kind: MetaKind::Text, text: text.into(), number: 0.0, vec: [0.0; 3] }
+}
+fn meta_num(key: &str, kind: MetaKind, number: f64) -> MetaEntry {
+    MetaEntry { key: key.into(), kind, text: String::new(), number, vec: [0.0; 3] }
+}
+
+/// Transform of a level: voxel (i,j,k)'s centre in world units is
+/// `origin + ijk * voxel_size`.
+fn world_transform(level: &Level) -> (f64, DVec3) {
+    let voxel_size = level.voxel_size() / level.frame.scale;
+    let origin = level.frame.to_world(level.voxel_centre(IVec3::ZERO));
+    (voxel_size, origin)
+}
+
+/// Writes `level` to `path` atomically (temporary name, then rename), and
+/// its points as `opts.points` says ([`points_path`] for a separate file; a
+/// stale points file from an earlier layout is removed).
+pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: WriteOptions) -> Result<()> {
+    let (voxel_size, origin) = world_transform(level);
+    let mut meta = vec![
+        meta_str("creator", CREATOR),
+        meta_num("shapeshifter_level", MetaKind::Int, level.index as f64),
+        meta_num("shapeshifter_resolution", MetaKind::Int, level.resolution as f64),
+        meta_str("shapeshifter_exemplar", &provenance.exemplar),
+        MetaEntry {
+            key: "shapeshifter_centre".into(),
+            kind: MetaKind::Vec3,
+            text: String::new(),
+            number: 0.0,
+            vec: level.frame.centre.to_array(),
+        },
+        meta_num("shapeshifter_scale", MetaKind::Float, level.frame.scale),
+        meta_str("shapeshifter_config_digest", &provenance.config_digest),
+        meta_num("shapeshifter_exemplar_open", MetaKind::Int, provenance.exemplar_open as i32 as f64),
+    ];
+    if let Some(seed) = provenance.seed {
+        // Kept as a string: OpenVDB has no unsigned 64-bit metadata.
+        meta.push(meta_str("shapeshifter_seed", &seed.to_string()));
+    }
+    let n = level.len();
+    let lengths = [level.offsets.len(), level.normals.len(), level.colours.len(), level.mask.len()];
+    if lengths.iter().any(|&l| l != n) {
+        return Err(Error::file(
+            path,
+            format!("inconsistent level: {n} voxels but {lengths:?} offsets/normals/colours/mask; not written"),
+        ));
+    }
+    if let Some(i) = level.first_non_finite() {
+        return Err(Error::file(path, format!("voxel {} has NaN or infinite features; not written", level.coords[i])));
+    }
+    let flat = |v: &[Vec3]| -> Vec<f32> { v.iter().flat_map(|p| p.to_array()).collect() };
+    let normals: Vec<Vec3> = level.normals.iter().map(|n| n.normalize_or_zero()).collect();
+    let data = LevelData {
+        coords: level.coords.iter().flat_map(|c| c.to_array()).collect(),
+        points: (0..level.len()).flat_map(|i| level.point_world(i).as_vec3().to_array()).collect(),
+        normals: flat(&normals),
+        colours: flat(&level.colours),
+        mask: level.mask.clone(),
+        voxel_size,
+        origin: origin.to_array(),
+        meta,
+    };
+    let write = |target: &Path, volumes: bool, points: bool| {
+        write_atomically(target, |tmp| {
+            let tmp_str = tmp.to_str().ok_or_else(|| Error::file(target, "path is not valid UTF-8"))?;
+            bridge::write_level_file(tmp_str, &data, opts.half_floats, volumes, points)
+                .map_err(|e| Error::file(target, e.what()))
+        })
+    };
+    write(path, true, opts.points == PointsLayout::Embedded)?;
+    let beside = points_path(path);
+    match opts.points {
+        PointsLayout::Separate => write(&beside, false, true),
+        PointsLayout::Embedded | PointsLayout::None => match std::fs::remove_file(&beside) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::file(&beside, e.to_string())),
+            _ => Ok(()),
+        },
+    }
+}
+
+fn find<'a>(meta: &'a [MetaEntry], key: &str) -> Option<&'a MetaEntry> {
+    meta.iter().find(|m| m.key == key)
+}
+
+/// Reads a level file back into the 10-channel features that were written.
+pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
+    check_input_file(path)?;
+    let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
+    let data = bridge::read_level_file(path_str).map_err(|e| Error::file(path, e.what()))?;
+    let missing = |key: &str| Error::file(path, format!("has no '{key}' metadata; not a shapeshifter level file"));
+    let resolution = find(&data.meta, "shapeshifter_resolution").ok_or_else(|| missing("shapeshifter_resolution"))?.number;
+    let index = find(&data.meta, "shapeshifter_level").ok_or_else(|| missing("shapeshifter_level"))?.number;
+    if !(resolution >= 1.0 && resolution.fract() == 0.0 && index >= 0.0) {
+        return Err(Error::file(path, "has an invalid level or resolution in its metadata"));
+    }
+    let resolution = resolution as u32;
+    let origin = DVec3::from_array(data.origin);
+    // Normalisation from metadata; else derived from the transform, which
+    // fixes it once the resolution is known (voxel_size = (2/res) / scale).
+    let scale = find(&data.meta, "shapeshifter_scale")
+        .map(|m| m.number)
+        .unwrap_or(2.0 / resolution as f64 / data.voxel_size);
+    let probe = Level { resolution, ..Default::default() };
+    let centre = find(&data.meta, "shapeshifter_centre")
+        .map(|m| DVec3::from_array(m.vec))
+        .unwrap_or_else(|| origin - probe.voxel_centre(IVec3::ZERO) / scale);
+    if !(scale.is_finite() && scale > 0.0 && centre.is_finite()) {
+        return Err(Error::file(path, "has an invalid normalisation in its metadata"));
+    }
+    let n = data.mask.len();
+    let mut level = Level {
+        index: index as usize,
+        resolution,
+        frame: Frame { centre, scale },
+        coords: data.coords.chunks_exact(3).map(|c| IVec3::new(c[0], c[1], c[2])).collect(),
+        normals: data.normals.chunks_exact(3).map(Vec3::from_slice).collect(),
+        colours: data.colours.chunks_exact(3).map(Vec3::from_slice).collect(),
+        mask: data.mask,
+        offsets: Vec::with_capacity(n),
+    };
+    // Offsets in voxel units from the world positions P.
+    let voxel_world = level.voxel_size() / scale;
+    for (i, p) in data.points.chunks_exact(3).enumerate() {
+        let centre_world = origin + level.coords[i].as_dvec3() * voxel_world;
+        let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        level.offsets.push(((p - centre_world) / voxel_world).as_vec3());
+    }
+    if let Some(i) = level.first_non_finite() {
+        return Err(Error::file(path, format!("voxel {} has NaN or infinite features", level.coords[i])));
+    }
+    let provenance = Provenance {
+        exemplar: find(&data.meta, "shapeshifter_exemplar").map(|m| m.text.clone()).unwrap_or_default(),
+        seed: find(&data.meta, "shapeshifter_seed").and_then(|m| m.text.parse().ok()),
+        config_digest: find(&data.meta, "shapeshifter_config_digest").map(|m| m.text.clone()).unwrap_or_default(),
+        exemplar_open: find(&data.meta, "shapeshifter_exemplar_open").is_some_and(|m| m.number != 0.0),
+    };
+    Ok((level, provenance))
+}
+
+/// Per-grid summary of any .vdb file (what `vdb_print -l -m` shows).
+pub fn summarise(path: &Path) -> Result<Vec<GridSummary>> {
+    check_input_file(path)?;
+    let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
+    bridge::summarise_vdb_file(path_str).map_err(|e| Error::file(path, e.what()))
+}

@@ -1,0 +1,305 @@
+//! @brief Sampling variants coarse to fine (METHOD.md section 5).
+//!
+//! 1. Level 0: the dense box of the exemplar's level 0, resized per axis by
+//!    `extent` around its centre (the anisotropic control), filled with N(0, 1);
+//!    the reverse process from t = 1 with `level0_steps` steps; prune (mask > 0
+//!    kept, mask set to 1).
+//! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
+//!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
+//!    process from there with `upper_steps` steps; prune.
+//! 3. Every stage's pruned grid is returned as a [`Level`] in the exemplar's frame,
+//!    so a caller can stop, edit a level and continue from it.
+//!
+//! Each variant is sampled alone, from its own seed ([`variant_seed`] of the run's
+//! seed and its index) and its own noise (drawn on the CPU from that seed, the
+//! level and the step, not from libtorch's global generator). So variant i is the
+//! same whichever shard computes it (`sample --first K -n N` on another machine
+//! writes exactly what one `sample -n` writes, for the same libtorch thread count
+//! and device), and continuing from an unedited level reproduces the finer levels
+//! of the uninterrupted run. Batching variants would save little on a CPU (the
+//! matrix products are as efficient for one variant's rows as for ten) and would
+//! tie each variant's floating-point results to its batch.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::IVec3;
+use tch::{Device, Kind, Tensor};
+
+use crate::config::Config;
+use crate::learn::schedule::{noise_to, reverse_times, sampler, Sampler};
+use crate::error::{Error, Result};
+use crate::learn::grid::SparseGrid;
+use crate::level::{Level, FEATURE_CHANNELS};
+use crate::learn::nn::{new_diffusion, new_upsampler, sparse_err, DiffusionNet, LevelNet, Upsampler};
+use crate::learn::sparse::SparseTensor;
+use crate::learn::train::{diffusion_checkpoint, diffusion_ema_checkpoint, mix_seed, upsampler_checkpoint};
+
+/// The trained networks of every level, read from a training folder.
+pub struct Models {
+    pub config: Config,
+    pub device: Device,
+    /// Diffusion model of each level, coarsest first.
+    pub diffusion: Vec<LevelNet<DiffusionNet>>,
+    /// Upsampler of each level (`None` at level 0).
+    pub upsamplers: Vec<Option<LevelNet<Upsampler>>>,
+}
+
+impl Models {
+    pub fn levels(&self) -> usize {
+        self.diffusion.len()
+    }
+}
+
+/// Loads the checkpoints of levels `0..levels` from `dir` (written by
+/// [`crate::learn::train::train_level`] with the same model configuration).
+pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -> Result<Models> {
+    if levels == 0 {
+        return Err(Error::Invalid("no levels to load".into()));
+    }
+    let mut diffusion = Vec::with_capacity(levels);
+    let mut upsamplers = Vec::with_capacity(levels);
+    for l in 0..levels {
+        let mut d = new_diffusion(&config.model, l, device)?;
+        // The weights' moving average where training kept one.
+        let p = if config.train.ema_decay > 0.0 { diffusion_ema_checkpoint(dir, l) } else { diffusion_checkpoint(dir, l) };
+        if !p.exists() {
+            return Err(Error::file(&p, format!("no diffusion checkpoint for level {l}: train it first")));
+        }
+        d.load(&p)?;
+        diffusion.push(d);
+        if l == 0 {
+            upsamplers.push(None);
+        } else {
+            let mut u = new_upsampler(&config.model, device)?;
+            let p = upsampler_checkpoint(dir, l);
+            if !p.exists() {
+                return Err(Error::file(&p, format!("no upsampler checkpoint for level {l}: train it first")));
+            }
+            u.load(&p)?;
+            upsamplers.push(Some(u));
+        }
+    }
+    Ok(Models { config: config.clone(), device, diffusion, upsamplers })
+}
+
+/// Freshly initialised networks for levels `0..levels` (libtorch's generator
+/// seeded with `seed` first, so the same seed gives the same networks): the
+/// floor of the degradation ladder, what the method makes of noise.
+pub fn untrained_models(config: &Config, levels: usize, device: Device, seed: u64) -> Result<Models> {
+    if levels == 0 {
+        return Err(Error::Invalid("no levels to build".into()));
+    }
+    tch::manual_seed(seed as i64);
+    let mut diffusion = Vec::with_capacity(levels);
+    let mut upsamplers = Vec::with_capacity(levels);
+    for l in 0..levels {
+        diffusion.push(new_diffusion(&config.model, l, device)?);
+        upsamplers.push(if l == 0 { None } else { Some(new_upsampler(&config.model, device)?) });
+    }
+    Ok(Models { config: config.clone(), device, diffusion, upsamplers })
+}
+
+/// What to sample.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampleOptions {
+    /// Index of the first variant (a shard of a larger set: `--first K`).
+    pub first: usize,
+    /// Number of variants.
+    pub n: usize,
+    /// The run's seed; variant i uses [`variant_seed`]`(seed, i)`.
+    pub seed: u64,
+    /// Per-axis scale of the level-0 box (1, 1, 1 = the exemplar's extent).
+    pub extent: [f32; 3],
+    /// Last level to produce (inclusive); `None` = the finest trained level.
+    pub stop_level: Option<usize>,
+    /// "ddpm" or "ddim".
+    pub sampler: String,
+    pub level0_steps: usize,
+    pub upper_steps: usize,
+    /// Upper levels start from U_l(...) noised to this time.
+    pub upper_t_max: f64,
+}
+
+impl SampleOptions {
+    /// The configuration's sampler and step counts, extent 1.
+    pub fn from_config(config: &Config, n: usize, seed: u64) -> Self {
+        SampleOptions {
+            first: 0,
+            n,
+            seed,
+            extent: [1.0; 3],
+            stop_level: None,
+            sampler: config.sample.sampler.clone(),
+            level0_steps: config.sample.level0_steps,
+            upper_steps: config.sample.upper_steps,
+            upper_t_max: config.train.upper_t_max,
+        }
+    }
+}
+
+/// The level-0 box of the exemplar resized by `extent` around its centre:
+/// `(min, size)` in voxels.
+pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
+    if level0.is_empty() {
+        return Err(Error::Invalid("the exemplar's level 0 has no voxels".into()));
+    }
+    if extent.iter().any(|e| !(e.is_finite() && *e > 0.0)) {
+        return Err(Error::Invalid(format!("extent {extent:?} must be positive")));
+    }
+    let lo = level0.coords.iter().fold(IVec3::MAX, |a, &c| a.min(c));
+    let hi = level0.coords.iter().fold(IVec3::MIN, |a, &c| a.max(c));
+    let size = hi - lo + IVec3::ONE;
+    let new_size = IVec3::from_array(
+        [0, 1, 2].map(|a| ((size[a] as f32 * extent[a]).round() as i32).max(1)),
+    );
+    // keep the centre: shift by half the change (floor division keeps it exact for even changes)
+    let new_lo = lo + IVec3::from_array([0, 1, 2].map(|a| (size[a] - new_size[a]).div_euclid(2)));
+    Ok((new_lo, new_size))
+}
+
+/// Samples `opts.n` variants. `exemplar_levels` gives the level-0 box and the frame.
+/// With `from` (a level of index k, e.g. an edited level file), the levels k+1 ..
+/// are produced from it for every variant; otherwise levels 0 ... Returns, per
+/// variant, the pruned level of each stage produced, coarsest first.
+pub fn sample(
+    models: &Models,
+    exemplar_levels: &[Level],
+    opts: &SampleOptions,
+    from: Option<Level>,
+) -> Result<Vec<Vec<Level>>> {
+    if opts.n == 0 {
+        return Ok(Vec::new());
+    }
+    let exemplar0 = exemplar_levels.first().ok_or_else(|| Error::Invalid("no exemplar levels".into()))?;
+    let frame = exemplar0.frame;
+    let last = opts.stop_level.unwrap_or(models.levels() - 1);
+    if last >= models.levels() {
+        return Err(Error::Invalid(format!(
+            "stop level {last} asked for, only levels 0..{} are trained",
+            models.levels() - 1
+        )));
+    }
+    let sampler =
+        sampler(&opts.sampler).ok_or_else(|| Error::Invalid(format!("unknown sampler '{}'", opts.sampler)))?;
+    if let Some(level) = &from {
+        let k = level.index;
+        if k >= last {
+            return Err(Error::Invalid(format!("continuing from level {k}: nothing finer to do (last level {last})")));
+        }
+        if let Some(ex) = exemplar_levels.get(k) {
+            if ex.resolution != level.resolution {
+                return Err(Error::Invalid(format!(
+                    "level {k} to continue from has resolution {}, the exemplar's level {k} has {}",
+                    level.resolution, ex.resolution
+                )));
+            }
+        }
+    }
+    let box0 = level0_box(exemplar0, opts.extent)?;
+    tch::no_grad(|| {
+        (opts.first..opts.first + opts.n)
+            .map(|i| {
+                let job = OneVariant { models, frame, last, box0, sampler: sampler.as_ref(), seed: variant_seed(opts.seed, i) };
+                job.run(exemplar0.resolution, opts, from.as_ref())
+            })
+            .collect()
+    })
+}
+
+/// The seed of variant `index` of a run with seed `run_seed`: variants are
+/// sampled one at a time from their own seeds, so any shard of indices
+/// (`--first K -n N`) reproduces exactly what one `sample -n` writes.
+pub fn variant_seed(run_seed: u64, index: usize) -> u64 {
+    mix_seed(run_seed, index as u64, 7, 0)
+}
+
+/// Standard normal noise of `rows` x 10 from SplitMix64 and Box-Muller on the
+/// CPU, seeded by (variant seed, level, step): independent of libtorch's
+/// global generator, of the batch and of the device, so a variant's noise is
+/// the same wherever and with whatever else it is sampled.
+fn gaussian(rows: usize, seed: u64, level: usize, step: usize, device: Device) -> Tensor {
+    let mut rng = crate::util::rng::Rng::new(mix_seed(seed, level as u64, 8, step as u64));
+    let n = rows * FEATURE_CHANNELS;
+    let mut v = Vec::with_capacity(n + 1);
+    while v.len() < n {
+        // Box-Muller: two normals from two uniforms in (0, 1].
+        let u1 = 1.0 - rng.uniform();
+        let u2 = rng.uniform();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let a = std::f64::consts::TAU * u2;
+        v.push((r * a.cos()) as f32);
+        v.push((r * a.sin()) as f32);
+    }
+    v.truncate(n);
+    Tensor::from_slice(&v).view([rows as i64, FEATURE_CHANNELS as i64]).to_device(device)
+}
+
+/// Everything one variant's coarse-to-fine pass needs.
+struct OneVariant<'a> {
+    models: &'a Models,
+    frame: crate::level::Frame,
+    last: usize,
+    box0: (IVec3, IVec3),
+    sampler: &'a dyn Sampler,
+    seed: u64,
+}
+
+impl OneVariant<'_> {
+    fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
+        let dev = self.models.device;
+        let mut out = Vec::new();
+        let (mut cur, first) = match from {
+            None => {
+                let (lo, size) = self.box0;
+                let bx = SparseGrid::full_box(resolution0, lo, size).map_err(|e| Error::Invalid(e.to_string()))?;
+                let noise = gaussian(bx.len(), self.seed, 0, 0, dev);
+                let x = SparseTensor::new(Arc::new(bx), noise).map_err(sparse_err)?;
+                let x = self.reverse(0, x, 1.0, opts.level0_steps)?;
+                let pruned = x.prune_by_mask().map_err(sparse_err)?;
+                out.push(pruned.to_level(0, self.frame).map_err(sparse_err)?);
+                (pruned, 1)
+            }
+            Some(level) => {
+                let one = SparseTensor::from_level(level, dev).map_err(sparse_err)?.prune_by_mask().map_err(sparse_err)?;
+                (one, level.index + 1)
+            }
+        };
+        for l in first..=self.last {
+            if cur.is_empty() {
+                let empty = SparseTensor::new(
+                    Arc::new(SparseGrid::empty(cur.grid.resolution() * 2)),
+                    Tensor::zeros([0, FEATURE_CHANNELS as i64], (Kind::Float, dev)),
+                )
+                .map_err(sparse_err)?;
+                out.push(empty.to_level(l, self.frame).map_err(sparse_err)?);
+                cur = empty;
+                continue;
+            }
+            let up = self.models.upsamplers[l]
+                .as_ref()
+                .ok_or_else(|| Error::Invalid(format!("level {l} has no upsampler")))?;
+            let u = up.net.forward_t(&cur, false)?;
+            let eps = gaussian(u.len(), self.seed, l, 0, dev);
+            let x = u.with_feats(noise_to(&u.feats, opts.upper_t_max, &eps)).map_err(sparse_err)?;
+            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps)?;
+            cur = x.prune_by_mask().map_err(sparse_err)?;
+            out.push(cur.to_level(l, self.frame).map_err(sparse_err)?);
+        }
+        Ok(out)
+    }
+
+    /// The reverse process of level `l` from `t_max` to 0 in `steps` steps.
+    fn reverse(&self, l: usize, mut x: SparseTensor, t_max: f64, steps: usize) -> Result<SparseTensor> {
+        let net = &self.models.diffusion[l].net;
+        let times = reverse_times(t_max, steps);
+        for (k, w) in times.windows(2).enumerate() {
+            let x0_hat = net.forward_at(&x, w[0], false)?;
+            let noise = gaussian(x.len(), self.seed, l, k + 1, self.models.device);
+            let next = self.sampler.step(&x.feats, &x0_hat.feats, w[0], w[1], &noise);
+            x = x.with_feats(next).map_err(sparse_err)?;
+        }
+        Ok(x)
+    }
+}
+

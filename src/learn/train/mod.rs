@@ -1,0 +1,715 @@
+//! @brief Training one level of the hierarchy (METHOD.md section 4): the level's
+//! upsampler U_l first (levels >= 1), then its diffusion model M_l.
+//!
+//! Data (all built once from the exemplar's levels, on `device`):
+//! - level 0: the DENSE box over the active voxels, with the flooded target of
+//!   [`flood_blur`]; a step sees `level0_batch` copies of the whole box, each with its
+//!   own t ~ U[0, 1];
+//! - levels >= 1: the subdivided coarse ground truth; children active in the fine
+//!   ground truth get their true features (mask +1), the others keep X_up's features
+//!   with mask -1 ([`flooded_target`]). The upsampler learns the whole grid (MSE to
+//!   that target); the diffusion model learns random `crop`^3 crops centred on random
+//!   active fine voxels, `upper_batch` per step, t ~ U[0, upper_t_max].
+//!
+//! The forward process is x_t = alpha(t) x_mix + sigma(t) eps with x_mix = x0 (the
+//! released code's behaviour, `mixing = "code"`) or, with `mixing = "paper"`,
+//! x_mix = gamma x0 + (1 - gamma) U_l(coarse), gamma = 1 - t / upper_t_max. The loss
+//! is the MSE between M_l(x_t, t) and x0 over all voxels and channels.
+//!
+//! Reproducibility: every step reseeds libtorch's generator and its own crop/time
+//! generator from (seed, level, phase, step), so a run is a pure function of the
+//! configuration, and a resumed run sees exactly the data the uninterrupted one
+//! would. What a resume cannot restore are the optimiser moments (tch does not expose
+//! Adam's state): they restart from zero, which perturbs the first few hundred steps
+//! after a resume slightly.
+//!
+//! Files in `out_dir` (all written atomically: temporary name, then rename):
+//! `level_K_diffusion.safetensors`, `level_K_upsampler.safetensors` (K >= 1),
+//! `level_K_state.json` ([`TrainState`]), `level_K_loss.png`. Checkpoints are written
+//! every `checkpoint_minutes`, on interruption and at the end; the state file is
+//! written after the weights, so it never claims more steps than were saved.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use glam::IVec3;
+use serde::{Deserialize, Serialize};
+use tch::{nn::OptimizerConfig, Device, Kind, Tensor};
+
+use crate::config::Config;
+use crate::util::rng::Rng;
+use crate::learn::schedule::noise_to_rows;
+use crate::error::{write_atomically, Error, Result};
+use crate::level::{Channel, Level};
+use crate::learn::nn::{mse, new_diffusion, new_upsampler, sparse_err, DiffusionNet, LevelNet, Upsampler};
+use crate::learn::sparse::{flood_blur, upsample_trilinear, SparseTensor};
+
+pub mod optim;
+
+use optim::{lr_at, Ema};
+
+/// Checkpoint of level `level`'s diffusion model in `dir`.
+pub fn diffusion_checkpoint(dir: &Path, level: usize) -> PathBuf {
+    dir.join(format!("level_{level}_diffusion.safetensors"))
+}
+/// The moving average of level `level`'s diffusion weights in `dir` (what
+/// sampling uses when `train.ema_decay` > 0).
+pub fn diffusion_ema_checkpoint(dir: &Path, level: usize) -> PathBuf {
+    dir.join(format!("level_{level}_diffusion_ema.safetensors"))
+}
+/// Checkpoint of level `level`'s upsampler in `dir` (levels >= 1).
+pub fn upsampler_checkpoint(dir: &Path, level: usize) -> PathBuf {
+    dir.join(format!("level_{level}_upsampler.safetensors"))
+}
+/// Training state of level `level` in `dir`.
+pub fn state_path(dir: &Path, level: usize) -> PathBuf {
+    dir.join(format!("level_{level}_state.json"))
+}
+/// Loss plot of level `level` in `dir`.
+pub fn loss_plot_path(dir: &Path, level: usize) -> PathBuf {
+    dir.join(format!("level_{level}_loss.png"))
+}
+
+/// Digest of what a level's training depends on, minus the iteration counts and the
+/// checkpoint interval: a run may be resumed with more iterations.
+pub fn resume_digest(config: &Config) -> String {
+    let mut c = config.clone();
+    c.train.level0_iterations = 0;
+    c.train.upper_iterations = 0;
+    c.train.upsampler_iterations = 0;
+    c.train.checkpoint_minutes = 0.0;
+    c.stage_digest("train")
+}
+
+/// What `level_K_state.json` holds.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct TrainState {
+    pub level: usize,
+    /// [`resume_digest`] of the configuration that trained it.
+    pub config_digest: String,
+    /// Full digest of that configuration (for the record).
+    pub full_config_digest: String,
+    pub upsampler_steps: usize,
+    pub diffusion_steps: usize,
+    /// Loss of every step, in order.
+    pub upsampler_loss: Vec<f32>,
+    pub diffusion_loss: Vec<f32>,
+    /// Training time so far (all sessions), seconds.
+    pub seconds: f64,
+    pub finished: bool,
+    pub note: String,
+}
+
+/// The training state recorded for `level` in `dir`, if one is there and reads.
+pub fn read_state(dir: &Path, level: usize) -> Option<TrainState> {
+    serde_json::from_str(&std::fs::read_to_string(state_path(dir, level)).ok()?).ok()
+}
+
+/// The outcome of [`train_level`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainReport {
+    pub level: usize,
+    /// Steps done in total (including those of earlier sessions when resumed).
+    pub upsampler_steps: usize,
+    pub diffusion_steps: usize,
+    /// Steps done in this call.
+    pub upsampler_steps_now: usize,
+    pub diffusion_steps_now: usize,
+    /// Mean loss of the first and last 10% of all steps (NaN when none).
+    pub diffusion_loss_start: f64,
+    pub diffusion_loss_end: f64,
+    pub upsampler_loss_start: f64,
+    pub upsampler_loss_end: f64,
+    /// Speed in this call, iterations per second (0 when none).
+    pub upsampler_it_per_s: f64,
+    pub diffusion_it_per_s: f64,
+    pub seconds: f64,
+    /// Whether every iteration the configuration asks for is done.
+    pub finished: bool,
+    pub interrupted: bool,
+    /// Voxels of one training item (the box at level 0, the subdivided grid above).
+    pub grid_voxels: usize,
+}
+
+/// Trains level `level` of the exemplar `levels` (coarsest first) into `out_dir`.
+/// With `resume`, continues from the checkpoints and state found there (their
+/// configuration must match up to iteration counts); without, starts afresh.
+pub fn train_level(
+    levels: &[Level],
+    level: usize,
+    config: &Config,
+    device: Device,
+    out_dir: &Path,
+    resume: bool,
+    progress: bool,
+) -> Result<TrainReport> {
+    train_level_with(levels, level, config, device, out_dir, resume, progress, None)
+}
+
+/// [`train_level`] that stops cleanly (checkpoint, state, plot) after the current
+/// step once `interrupt` is set (e.g. by a Ctrl-C handler).
+#[allow(clippy::too_many_arguments)]
+pub fn train_level_with(
+    levels: &[Level],
+    level: usize,
+    config: &Config,
+    device: Device,
+    out_dir: &Path,
+    resume: bool,
+    progress: bool,
+    interrupt: Option<&AtomicBool>,
+) -> Result<TrainReport> {
+    if level >= levels.len() {
+        return Err(Error::Invalid(format!("level {level} asked for, the exemplar has {} levels", levels.len())));
+    }
+    for (i, l) in levels.iter().enumerate() {
+        if l.is_empty() {
+            return Err(Error::Invalid(format!("exemplar level {i} has no voxels")));
+        }
+    }
+    if !out_dir.is_dir() {
+        return Err(Error::file(out_dir, "output folder does not exist"));
+    }
+    let t0 = Instant::now();
+    let tc = &config.train;
+    let digest = resume_digest(config);
+
+    // ------------------------------------------------------------ state
+    let mut state = TrainState {
+        level,
+        config_digest: digest.clone(),
+        full_config_digest: config.digest(),
+        note: "Adam moments are not checkpointed; they restart on resume".into(),
+        ..Default::default()
+    };
+    let sp = state_path(out_dir, level);
+    if resume && sp.exists() {
+        let text = std::fs::read_to_string(&sp).map_err(|e| Error::file(&sp, e.to_string()))?;
+        let old: TrainState =
+            serde_json::from_str(&text).map_err(|e| Error::file(&sp, format!("bad training state: {e}")))?;
+        if old.level != level || old.config_digest != digest {
+            return Err(Error::file(
+                &sp,
+                format!(
+                    "was written for level {} with configuration {}, not level {level} with {digest}: \
+                     train without resume to start afresh",
+                    old.level, old.config_digest
+                ),
+            ));
+        }
+        state.upsampler_steps = old.upsampler_steps;
+        state.diffusion_steps = old.diffusion_steps;
+        state.upsampler_loss = old.upsampler_loss;
+        state.diffusion_loss = old.diffusion_loss;
+        state.seconds = old.seconds;
+        state.upsampler_loss.truncate(state.upsampler_steps);
+        state.diffusion_loss.truncate(state.diffusion_steps);
+        log::info!("level {level}: resuming at upsampler step {}, diffusion step {}", old.upsampler_steps, old.diffusion_steps);
+    } else if resume {
+        log::info!("level {level}: nothing to resume in {}, starting afresh", out_dir.display());
+    }
+    let seconds_before = state.seconds;
+
+    // ------------------------------------------------------------ models
+    tch::manual_seed(mix_seed(tc.seed, level as u64, 0, u64::MAX) as i64);
+    let mut diffusion = new_diffusion(&config.model, level, device)?;
+    let mut upsampler = if level > 0 { Some(new_upsampler(&config.model, device)?) } else { None };
+    if state.diffusion_steps > 0 {
+        diffusion.load(&diffusion_checkpoint(out_dir, level))?;
+    }
+    if let Some(u) = upsampler.as_mut() {
+        if state.upsampler_steps > 0 {
+            u.load(&upsampler_checkpoint(out_dir, level))?;
+        }
+    }
+
+    // The weights' moving average, continued from an earlier session's.
+    let ema_path = diffusion_ema_checkpoint(out_dir, level);
+    let ema = std::cell::RefCell::new(if tc.ema_decay > 0.0 {
+        let saved = (state.diffusion_steps > 0 && ema_path.exists()).then_some(ema_path.as_path());
+        Some(Ema::new(&diffusion.vs, tc.ema_decay, saved)?)
+    } else {
+        None
+    });
+    let save_ema = || -> Result<()> { ema.borrow().as_ref().map_or(Ok(()), |e| e.save(&ema_path)) };
+    let lr = |step: usize, total: usize, base: f64| lr_at(step, total, base, tc.lr_warmup_steps, tc.lr_final_ratio);
+
+    let mut ckpt = Checkpointer {
+        out_dir: out_dir.to_path_buf(),
+        level,
+        every_s: tc.checkpoint_minutes * 60.0,
+        last: Instant::now(),
+        session_start: t0,
+        seconds_before,
+    };
+    let mut interrupted = false;
+    let stop = || interrupt.map(|f| f.load(Ordering::Relaxed)).unwrap_or(false);
+    let (mut up_now, mut up_rate) = (0usize, 0.0);
+    let grid_voxels;
+
+    let diff_total = if level == 0 { tc.level0_iterations } else { tc.upper_iterations };
+    let (mut diff_now, mut diff_rate) = (0usize, 0.0);
+
+    if level == 0 {
+        // -------------------------------------------------------- level 0
+        let gt = SparseTensor::from_level(&levels[0], device).map_err(sparse_err)?;
+        let target = flood_blur(&gt).map_err(sparse_err)?;
+        grid_voxels = target.len();
+        let copies: Vec<&SparseTensor> = (0..tc.level0_batch).map(|_| &target).collect();
+        let x0 = SparseTensor::batch(&copies).map_err(sparse_err)?;
+        let n = target.len();
+        let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
+        let net = &diffusion.net;
+        let phase = Phase { name: "level 0 diffusion", total: diff_total, progress };
+        let base = state.clone();
+        let d_ref = &diffusion;
+        let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
+            let mut rng = Rng::new(mix_seed(tc.seed, 0, 2, step as u64));
+            tch::manual_seed(rng.next_u64() as i64);
+            let t_items: Vec<f32> = (0..tc.level0_batch).map(|_| rng.uniform() as f32).collect();
+            let t_rows: Vec<f32> = t_items.iter().flat_map(|&t| std::iter::repeat(t).take(n)).collect();
+            let t_rows = Tensor::from_slice(&t_rows).to_device(device);
+            opt.set_lr(lr(step, diff_total, tc.lr));
+            let loss = diffusion_step(net, &mut opt, &x0, None, &t_rows, 1.0, tc.grad_clip)?;
+            if let Some(e) = ema.borrow_mut().as_mut() {
+                e.update();
+            }
+            Ok(loss)
+        }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
+        diff_now = r.0;
+        diff_rate = r.1;
+        interrupted |= r.2;
+    } else {
+        // -------------------------------------------------------- levels >= 1
+        let coarse = SparseTensor::from_level(&levels[level - 1], device).map_err(sparse_err)?;
+        let fine = SparseTensor::from_level(&levels[level], device).map_err(sparse_err)?;
+        let target = flooded_target(&coarse, &fine)?;
+        grid_voxels = target.len();
+        let centres: Vec<IVec3> = levels[level]
+            .coords
+            .iter()
+            .zip(&levels[level].mask)
+            .filter(|(_, &m)| m > 0.0)
+            .map(|(c, _)| *c)
+            .collect();
+        if centres.is_empty() {
+            return Err(Error::Invalid(format!("exemplar level {level} has no active voxel")));
+        }
+        let u: &LevelNet<Upsampler> = upsampler.as_ref().expect("upsampler exists above level 0");
+        // upsampler: whole grid
+        {
+            let mut opt = tch::nn::AdamW::default().build(&u.vs, tc.upsampler_lr)?;
+            let net = &u.net;
+            let phase = Phase { name: "upsampler", total: tc.upsampler_iterations, progress };
+            let target_f = target.feats.shallow_clone();
+            let base = state.clone();
+            let r = phase.run(&mut state.upsampler_steps, &mut state.upsampler_loss, &stop, |step| {
+                tch::manual_seed(mix_seed(tc.seed, level as u64, 1, step as u64) as i64);
+                opt.set_lr(lr(step, tc.upsampler_iterations, tc.upsampler_lr));
+                let pred = net.forward_t(&coarse, true)?;
+                let loss = mse(&pred.feats, &target_f);
+                opt.zero_grad();
+                loss.backward();
+                opt.clip_grad_norm(tc.grad_clip);
+                opt.step();
+                Ok(loss.double_value(&[]))
+            }, |s| ckpt.maybe(&base, false, s, Some(u), None).map(|_| ()))?;
+            up_now = r.0;
+            up_rate = r.1;
+            interrupted |= r.2;
+        }
+        let u_ref: &LevelNet<Upsampler> = upsampler.as_ref().unwrap();
+        if up_now > 0 || interrupted {
+            ckpt.save(&state, Some(u_ref), None)?;
+        }
+        // diffusion: random crops
+        if !interrupted {
+            let x_blur = if tc.mixing == "paper" {
+                Some(tch::no_grad(|| u_ref.net.forward_t(&coarse, false))?.map(|f| f.detach()))
+            } else {
+                None
+            };
+            let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
+            let net = &diffusion.net;
+            let phase = Phase { name: "diffusion", total: diff_total, progress };
+            let base = state.clone();
+            let d_ref = &diffusion;
+            let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
+                let mut rng = Rng::new(mix_seed(tc.seed, level as u64, 2, step as u64));
+                tch::manual_seed(rng.next_u64() as i64);
+                let mut crops = Vec::with_capacity(tc.upper_batch);
+                let mut blurs = Vec::new();
+                let mut t_rows = Vec::new();
+                for _ in 0..tc.upper_batch {
+                    let c = centres[rng.below(centres.len())];
+                    let t = (rng.uniform() * tc.upper_t_max) as f32;
+                    let crop = target.crop(c, 0, tc.crop).map_err(sparse_err)?;
+                    t_rows.extend(std::iter::repeat(t).take(crop.len()));
+                    if let Some(b) = &x_blur {
+                        blurs.push(b.crop(c, 0, tc.crop).map_err(sparse_err)?);
+                    }
+                    crops.push(crop);
+                }
+                let x0 = SparseTensor::batch(&crops.iter().collect::<Vec<_>>()).map_err(sparse_err)?;
+                let blur = if blurs.is_empty() {
+                    None
+                } else {
+                    Some(Tensor::cat(&blurs.iter().map(|b| &b.feats).collect::<Vec<_>>(), 0))
+                };
+                let t_rows = Tensor::from_slice(&t_rows).to_device(device);
+                opt.set_lr(lr(step, diff_total, tc.lr));
+                let loss = diffusion_step(net, &mut opt, &x0, blur.as_ref(), &t_rows, tc.upper_t_max, tc.grad_clip)?;
+                if let Some(e) = ema.borrow_mut().as_mut() {
+                    e.update();
+                }
+                Ok(loss)
+            }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
+            diff_now = r.0;
+            diff_rate = r.1;
+            interrupted |= r.2;
+        }
+    }
+
+    // ------------------------------------------------------------ final save
+    state.finished = state.diffusion_steps >= diff_total
+        && (level == 0 || state.upsampler_steps >= tc.upsampler_iterations);
+    state.seconds = seconds_before + t0.elapsed().as_secs_f64();
+    ckpt.save(&state, upsampler.as_ref(), Some(&diffusion))?;
+    save_ema()?;
+    let plot = loss_plot_path(out_dir, level);
+    write_atomically(&plot, |tmp| write_loss_plot(tmp, &state.upsampler_loss, &state.diffusion_loss))?;
+
+    let (ds, de) = start_end(&state.diffusion_loss);
+    let (us, ue) = start_end(&state.upsampler_loss);
+    Ok(TrainReport {
+        level,
+        upsampler_steps: state.upsampler_steps,
+        diffusion_steps: state.diffusion_steps,
+        upsampler_steps_now: up_now,
+        diffusion_steps_now: diff_now,
+        diffusion_loss_start: ds,
+        diffusion_loss_end: de,
+        upsampler_loss_start: us,
+        upsampler_loss_end: ue,
+        upsampler_it_per_s: up_rate,
+        diffusion_it_per_s: diff_rate,
+        seconds: t0.elapsed().as_secs_f64(),
+        finished: state.finished,
+        interrupted,
+        grid_voxels,
+    })
+}
+
+/// The flooded target of a level >= 1 on the coarse ground truth's subdivision:
+/// children active in the fine ground truth (`fine`, mask > 0) get their true
+/// features with mask +1; every other child keeps X_up's features with mask -1.
+pub fn flooded_target(coarse: &SparseTensor, fine: &SparseTensor) -> Result<SparseTensor> {
+    tch::no_grad(|| {
+        let x_up = upsample_trilinear(coarse).map_err(sparse_err)?;
+        let feats = x_up.feats.detach().copy();
+        let _ = feats.narrow(1, Channel::Mask.start() as i64, 1).fill_(-1.0);
+        let rows = x_up.grid.lookup(&fine.grid);
+        let mask: Vec<f32> = Vec::try_from(
+            fine.feats.narrow(1, Channel::Mask.start() as i64, 1).to_device(Device::Cpu).to_kind(Kind::Float).view([-1]),
+        )?;
+        let (mut dst, mut src) = (Vec::new(), Vec::new());
+        let mut orphans = 0usize;
+        for (i, &r) in rows.iter().enumerate() {
+            if r < 0 {
+                orphans += 1;
+            } else if mask[i] > 0.0 {
+                dst.push(r);
+                src.push(i as i64);
+            }
+        }
+        if orphans > 0 {
+            log::warn!("{orphans} fine voxels have no active parent in the coarse level; they are ignored");
+        }
+        let dev = feats.device();
+        let true_feats = fine.feats.index_select(0, &Tensor::from_slice(&src).to_device(dev)).copy();
+        let _ = true_feats.narrow(1, Channel::Mask.start() as i64, 1).fill_(1.0);
+        let feats = feats.index_copy(0, &Tensor::from_slice(&dst).to_device(dev), &true_feats);
+        x_up.with_feats(feats).map_err(sparse_err)
+    })
+}
+
+/// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`).
+fn diffusion_step(
+    net: &DiffusionNet,
+    opt: &mut tch::nn::Optimizer,
+    x0: &SparseTensor,
+    x_blur: Option<&Tensor>,
+    t_rows: &Tensor,
+    t_max: f64,
+    clip: f64,
+) -> Result<f64> {
+    let eps = x0.feats.randn_like();
+    let x_mix = match x_blur {
+        Some(b) => {
+            let gamma = (t_rows * (-1.0 / t_max) + 1.0).clamp(0.0, 1.0).unsqueeze(1);
+            &x0.feats * &gamma + b * (1.0 - &gamma)
+        }
+        None => x0.feats.shallow_clone(),
+    };
+    let x_t = x0.with_feats(noise_to_rows(&x_mix, t_rows, &eps)).map_err(sparse_err)?;
+    let pred = net.forward_t(&x_t, t_rows, true)?;
+    let loss = mse(&pred.feats, &x0.feats);
+    opt.zero_grad();
+    loss.backward();
+    opt.clip_grad_norm(clip);
+    opt.step();
+    Ok(loss.double_value(&[]))
+}
+
+/// A training loop with its progress bar.
+struct Phase {
+    name: &'static str,
+    total: usize,
+    progress: bool,
+}
+
+impl Phase {
+    /// Runs steps `*steps .. total`; returns (steps run, it/s, interrupted).
+    fn run(
+        &self,
+        steps: &mut usize,
+        losses: &mut Vec<f32>,
+        stop: &dyn Fn() -> bool,
+        mut step: impl FnMut(usize) -> Result<f64>,
+        mut after: impl FnMut(&StepInfo) -> Result<()>,
+    ) -> Result<(usize, f64, bool)> {
+        let start = *steps;
+        if start >= self.total {
+            return Ok((0, 0.0, false));
+        }
+        let bar = if self.progress {
+            let b = indicatif::ProgressBar::new(self.total as u64);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} {per_sec} ETA {eta}",
+                )
+                .expect("valid template"),
+            );
+            b.set_position(start as u64);
+            b.reset_eta();
+            b
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        let t0 = Instant::now();
+        let mut interrupted = false;
+        while *steps < self.total {
+            let loss = step(*steps)?;
+            if !loss.is_finite() {
+                return Err(Error::Invalid(format!("{}: loss became {loss} at step {}", self.name, *steps)));
+            }
+            losses.push(loss as f32);
+            *steps += 1;
+            log::debug!("{} step {} loss {loss:.6}", self.name, *steps);
+            if *steps % (self.total / 10).max(1) == 0 {
+                log::info!("{} step {}/{} loss {loss:.5}", self.name, *steps, self.total);
+            }
+            bar.set_message(format!("{} loss {loss:.4}", self.name));
+            bar.inc(1);
+            after(&StepInfo { steps: *steps, losses })?;
+            if stop() {
+                interrupted = true;
+                break;
+            }
+        }
+        bar.finish_and_clear();
+        let n = *steps - start;
+        let dt = t0.elapsed().as_secs_f64();
+        Ok((n, if dt > 0.0 { n as f64 / dt } else { 0.0 }, interrupted))
+    }
+}
+
+struct StepInfo<'a> {
+    steps: usize,
+    losses: &'a [f32],
+}
+
+/// Writes checkpoints at an interval and on demand.
+struct Checkpointer {
+    out_dir: PathBuf,
+    level: usize,
+    every_s: f64,
+    last: Instant,
+    session_start: Instant,
+    seconds_before: f64,
+}
+
+impl Checkpointer {
+    /// Periodic checkpoint (every `checkpoint_minutes`) during a phase: `base` is the
+    /// state before the phase, `info` the phase's progress. Whether it wrote one.
+    fn maybe(
+        &mut self,
+        base: &TrainState,
+        diffusion_phase: bool,
+        info: &StepInfo,
+        u: Option<&LevelNet<Upsampler>>,
+        d: Option<&LevelNet<DiffusionNet>>,
+    ) -> Result<bool> {
+        if self.last.elapsed().as_secs_f64() < self.every_s {
+            return Ok(false);
+        }
+        let mut st = base.clone();
+        if diffusion_phase {
+            st.diffusion_steps = info.steps;
+            st.diffusion_loss = info.losses.to_vec();
+        } else {
+            st.upsampler_steps = info.steps;
+            st.upsampler_loss = info.losses.to_vec();
+        }
+        log::debug!("level {}: checkpoint", self.level);
+        self.save(&st, u, d)?;
+        Ok(true)
+    }
+
+    fn save(
+        &mut self,
+        state: &TrainState,
+        u: Option<&LevelNet<Upsampler>>,
+        d: Option<&LevelNet<DiffusionNet>>,
+    ) -> Result<()> {
+        if let Some(u) = u {
+            u.save(&upsampler_checkpoint(&self.out_dir, self.level))?;
+        }
+        if let Some(d) = d {
+            d.save(&diffusion_checkpoint(&self.out_dir, self.level))?;
+        }
+        let mut st = state.clone();
+        st.seconds = self.seconds_before + self.session_start.elapsed().as_secs_f64();
+        let path = state_path(&self.out_dir, self.level);
+        let text = serde_json::to_string(&st).map_err(|e| Error::file(&path, e.to_string()))?;
+        write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(tmp, e.to_string())))?;
+        self.last = Instant::now();
+        Ok(())
+    }
+}
+
+fn start_end(v: &[f32]) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let k = (v.len() / 10).max(1);
+    let mean = |s: &[f32]| s.iter().map(|&x| x as f64).sum::<f64>() / s.len() as f64;
+    (mean(&v[..k]), mean(&v[v.len() - k..]))
+}
+
+/// Draws the loss curves (log-scale y, steps of each phase spread over the width):
+/// upsampler blue, diffusion red, decade lines grey. No text.
+pub fn write_loss_plot(path: &Path, upsampler: &[f32], diffusion: &[f32]) -> Result<()> {
+    let (w, h) = (800u32, 400u32);
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let all: Vec<f64> = upsampler.iter().chain(diffusion).map(|&x| x as f64).filter(|x| *x > 0.0 && x.is_finite()).collect();
+    if !all.is_empty() {
+        let lo = all.iter().cloned().fold(f64::INFINITY, f64::min).log10().floor();
+        let hi = all.iter().cloned().fold(f64::NEG_INFINITY, f64::max).log10().ceil().max(lo + 1.0);
+        let y_of = |v: f64| -> i64 {
+            let f = (v.max(1e-30).log10() - lo) / (hi - lo);
+            ((1.0 - f) * (h - 1) as f64).round() as i64
+        };
+        let mut d = lo;
+        while d <= hi {
+            let y = y_of(10f64.powf(d)).clamp(0, h as i64 - 1) as u32;
+            for x in 0..w {
+                img.put_pixel(x, y, image::Rgb([210, 210, 210]));
+            }
+            d += 1.0;
+        }
+        for (series, colour) in [(upsampler, [40u8, 80, 220]), (diffusion, [220u8, 40, 40])] {
+            if series.is_empty() {
+                continue;
+            }
+            // mean of the steps that fall into each pixel column
+            let mut prev: Option<(i64, i64)> = None;
+            for x in 0..w as usize {
+                let a = x * series.len() / w as usize;
+                let b = ((x + 1) * series.len() / w as usize).max(a + 1).min(series.len());
+                if a >= series.len() {
+                    break;
+                }
+                let m = series[a..b].iter().map(|&v| v as f64).sum::<f64>() / (b - a) as f64;
+                let p = (x as i64, y_of(m));
+                let q = prev.unwrap_or(p);
+                draw_line(&mut img, q, p, colour);
+                prev = Some(p);
+            }
+        }
+    }
+    img.save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, e.to_string()))
+}
+
+fn draw_line(img: &mut image::RgbImage, a: (i64, i64), b: (i64, i64), c: [u8; 3]) {
+    let n = (b.0 - a.0).abs().max((b.1 - a.1).abs()).max(1);
+    for i in 0..=n {
+        let x = a.0 + (b.0 - a.0) * i / n;
+        let y = a.1 + (b.1 - a.1) * i / n;
+        for dy in 0..2 {
+            let (px, py) = (x, y + dy);
+            if px >= 0 && py >= 0 && (px as u32) < img.width() && (py as u32) < img.height() {
+                img.put_pixel(px as u32, py as u32, image::Rgb(c));
+            }
+        }
+    }
+}
+
+/// SplitMix64 of a tuple: the per-step seeds.
+pub(crate) fn mix_seed(seed: u64, level: u64, phase: u64, step: u64) -> u64 {
+    let mut r = Rng::new(seed ^ 0x5348_4150_4553_4846);
+    let mut h = r.next_u64();
+    for v in [level, phase, step] {
+        h = Rng::new(h ^ v.wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64();
+    }
+    h >> 1 // non-negative as i64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn loss_plot_draws_both_curves() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("loss.png");
+        let up: Vec<f32> = (0..50).map(|i| 1.0 / (1.0 + i as f32)).collect();
+        let diff: Vec<f32> = (0..3000).map(|i| 0.5 * (-(i as f32) / 1000.0).exp() + 0.01).collect();
+        write_loss_plot(&p, &up, &diff).unwrap();
+        let img = image::open(&p).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (800, 400));
+        let count = |c: [u8; 3]| img.pixels().filter(|px| px.0 == c).count();
+        assert!(count([220, 40, 40]) > 800, "diffusion curve");
+        assert!(count([40, 80, 220]) > 800, "upsampler curve");
+        // empty histories still give an image
+        write_loss_plot(&p, &[], &[]).unwrap();
+    }
+
+    #[test]
+    fn resume_digest_ignores_iterations_only() {
+        let a = Config::load("cpu", &[]).unwrap();
+        let b = Config::load("cpu", &["train.upper_iterations=9".into(), "train.checkpoint_minutes=7".into()]).unwrap();
+        let c = Config::load("cpu", &["train.lr=0.5".into()]).unwrap();
+        assert_eq!(resume_digest(&a), resume_digest(&b));
+        assert_ne!(resume_digest(&a), resume_digest(&c));
+    }
+
+    #[test]
+    fn flooded_target_marks_fine_voxels() {
+        let levels = crate::testing::synthetic::sphere_levels(&[8, 16], glam::DVec3::ZERO, 0.5);
+        let c = SparseTensor::from_level(&levels[0], Device::Cpu).unwrap();
+        let f = SparseTensor::from_level(&levels[1], Device::Cpu).unwrap();
+        let t = flooded_target(&c, &f).unwrap();
+        assert_eq!(t.len(), 8 * c.len());
+        let mask: Vec<f32> = Vec::try_from(t.channel(Channel::Mask).view([-1])).unwrap();
+        let active = mask.iter().filter(|&&m| m == 1.0).count();
+        assert_eq!(active, f.len());
+        assert_eq!(mask.iter().filter(|&&m| m == -1.0).count(), t.len() - f.len());
+        // true features where active
+        let rows = t.grid.lookup(&f.grid);
+        let r0 = rows[3];
+        let got = t.feats.get(r0);
+        assert!((got - f.feats.get(3)).abs().max().double_value(&[]) < 1e-6);
+    }
+}

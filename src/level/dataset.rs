@@ -1,0 +1,237 @@
+//! An encoded exemplar on disk: one level file per level (`level_0.vdb`
+//! coarsest first) and `manifest.json` (levels, resolutions, normalisation,
+//! source mesh digest, encoding options and timings), optionally a preview PNG
+//! per level. This is what `encode` writes and `train` reads.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::encode::{EncodeOptions, EncodeStats, Pooling};
+use crate::error::{write_atomically, Error, Result};
+use crate::level::Level;
+use crate::io::mesh::Mesh;
+use crate::render::{self, RenderOptions};
+use crate::io::vdb::{self, Provenance, WriteOptions};
+
+pub const MANIFEST: &str = "manifest.json";
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LevelEntry {
+    pub index: usize,
+    pub resolution: u32,
+    pub voxels: usize,
+    pub file: String,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub creator: String,
+    /// Stem of the exemplar's file name.
+    pub exemplar: String,
+    /// The mesh file as given, or "(embedded)" for the demo exemplar.
+    pub source: String,
+    /// SHA-256 of the source file's bytes (or of the generated mesh).
+    pub source_sha256: String,
+    pub triangles: usize,
+    /// The exemplar has boundary edges (meshing then prefers APSS).
+    pub open_surface: bool,
+    /// Normalisation: world = centre + normalised / scale.
+    pub centre: [f64; 3],
+    pub scale: f64,
+    pub sampling_resolution: u32,
+    pub pooling: String,
+    pub levels: Vec<LevelEntry>,
+    /// Wall seconds per encoding stage.
+    pub seconds: std::collections::BTreeMap<String, f64>,
+}
+
+/// SHA-256 (hex) of a file's bytes.
+pub fn file_sha256(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
+    Ok(hex(&Sha256::digest(&bytes)))
+}
+
+/// SHA-256 (hex) of a mesh's geometry and colours, for generated meshes.
+pub fn mesh_sha256(mesh: &Mesh) -> String {
+    let mut h = Sha256::new();
+    for p in &mesh.positions {
+        for v in p.to_array() {
+            h.update(v.to_le_bytes());
+        }
+    }
+    for t in &mesh.triangles {
+        for v in t {
+            h.update(v.to_le_bytes());
+        }
+    }
+    if let crate::io::mesh::MeshColours::PerVertex(c) = &mesh.colours {
+        for p in c {
+            for v in p.to_array() {
+                h.update(v.to_le_bytes());
+            }
+        }
+    }
+    hex(&h.finalize())
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+pub fn level_file_name(index: usize) -> String {
+    format!("level_{index}.vdb")
+}
+
+/// Writes levels, manifest and (optionally) previews into `dir`, which is
+/// created if needed. The manifest is written last: a folder with a manifest
+/// is complete.
+#[allow(clippy::too_many_arguments)]
+pub fn write(
+    dir: &Path,
+    mesh: &Mesh,
+    source: &str,
+    source_sha256: &str,
+    levels: &[Level],
+    options: &EncodeOptions,
+    stats: &EncodeStats,
+    previews: Option<&RenderOptions>,
+    write: WriteOptions,
+) -> Result<Manifest> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
+    let open_surface = !mesh.is_closed();
+    let provenance = Provenance { exemplar: mesh.name.clone(), exemplar_open: open_surface, ..Default::default() };
+    let mut entries = Vec::new();
+    for level in levels {
+        let file = level_file_name(level.index);
+        vdb::write_level(&dir.join(&file), level, &provenance, write)?;
+        if let Some(opts) = previews {
+            let img = render::render_level(level, opts)?;
+            render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
+        }
+        entries.push(LevelEntry { index: level.index, resolution: level.resolution, voxels: level.len(), file });
+    }
+    let frame = levels.first().map(|l| l.frame).unwrap_or_default();
+    let seconds = [
+        ("normalise", stats.normalise_s),
+        ("voxelise", stats.voxelise_s),
+        ("sort", stats.sort_s),
+        ("sample", stats.sample_s),
+        ("pool", stats.pool_s),
+        ("output", stats.output_s),
+        ("total", stats.total_s),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    let manifest = Manifest {
+        creator: vdb::CREATOR.into(),
+        exemplar: mesh.name.clone(),
+        source: source.into(),
+        source_sha256: source_sha256.into(),
+        triangles: mesh.triangles.len(),
+        open_surface,
+        centre: frame.centre.to_array(),
+        scale: frame.scale,
+        sampling_resolution: options.sampling_resolution,
+        pooling: match options.pooling {
+            Pooling::Qem => "qem".into(),
+            Pooling::Average => "average".into(),
+        },
+        levels: entries,
+        seconds,
+    };
+    let path = dir.join(MANIFEST);
+    let text = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
+    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))?;
+    Ok(manifest)
+}
+
+/// Reads a folder written by [`write`]: its manifest and its levels.
+pub fn read(dir: &Path) -> Result<(Manifest, Vec<Level>)> {
+    let manifest = read_manifest(dir)?;
+    let mut levels = Vec::with_capacity(manifest.levels.len());
+    for e in &manifest.levels {
+        let (level, _) = vdb::read_level(&dir.join(&e.file))?;
+        levels.push(level);
+    }
+    Ok((manifest, levels))
+}
+
+pub fn read_manifest(dir: &Path) -> Result<Manifest> {
+    let path: PathBuf = dir.join(MANIFEST);
+    if !dir.is_dir() {
+        return Err(Error::file(dir, "no such folder (expected the output of `shapeshifter encode`)"));
+    }
+    let text = std::fs::read_to_string(&path)
+        .map_err(|_| Error::file(dir, "has no manifest.json (expected the output of `shapeshifter encode`)"))?;
+    serde_json::from_str(&text).map_err(|e| Error::file(&path, format!("invalid manifest: {e}")))
+}
+
+/// What [`compare_levels`] found.
+#[derive(Clone, Debug, Default)]
+pub struct LevelComparison {
+    /// Level files found under the first folder.
+    pub compared: usize,
+    /// One line per file that is missing from the second folder or differs.
+    pub differences: Vec<String>,
+}
+
+/// Every `level_K.vdb` under `a` (recursively) against the file at the same
+/// relative path under `b`: the same voxels, offsets, normals, colours and
+/// mask, bit for bit (the files themselves differ: OpenVDB writes a fresh
+/// UUID into each).
+pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
+    fn walk(dir: &Path, out: &mut Vec<std::path::PathBuf>) -> Result<()> {
+        let mut entries: Vec<_> = std::fs::read_dir(dir)
+            .map_err(|e| Error::file(dir, e.to_string()))?
+            .filter_map(|e| e.ok())
+            .map(|e| e.path())
+            .collect();
+        entries.sort();
+        for p in entries {
+            if p.is_dir() && !p.is_symlink() {
+                walk(&p, out)?;
+            } else if p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+                // Points files hold the same points as their level file's volumes.
+                n.starts_with("level_") && n.ends_with(".vdb") && !crate::io::vdb::is_points_file(n)
+            }) {
+                out.push(p);
+            }
+        }
+        Ok(())
+    }
+    let mut files = Vec::new();
+    walk(a, &mut files)?;
+    let mut in_b = Vec::new();
+    walk(b, &mut in_b)?;
+    let mut report = LevelComparison { compared: files.len(), ..Default::default() };
+    for fa in files {
+        let rel = fa.strip_prefix(a).unwrap_or(&fa).to_path_buf();
+        let fb = b.join(&rel);
+        if !fb.is_file() {
+            report.differences.push(format!("{}: missing from {}", rel.display(), b.display()));
+            continue;
+        }
+        let (la, _) = crate::io::vdb::read_level(&fa)?;
+        let (lb, _) = crate::io::vdb::read_level(&fb)?;
+        let bits = |v: &[glam::Vec3]| v.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<u32>>();
+        let same = la.resolution == lb.resolution
+            && la.coords == lb.coords
+            && bits(&la.offsets) == bits(&lb.offsets)
+            && bits(&la.normals) == bits(&lb.normals)
+            && bits(&la.colours) == bits(&lb.colours)
+            && la.mask.iter().map(|m| m.to_bits()).eq(lb.mask.iter().map(|m| m.to_bits()));
+        if !same {
+            report.differences.push(format!("{}: {} vs {} voxels, features differ", rel.display(), la.len(), lb.len()));
+        }
+    }
+    for fb in in_b {
+        let rel = fb.strip_prefix(b).unwrap_or(&fb).to_path_buf();
+        if !a.join(&rel).is_file() {
+            report.differences.push(format!("{}: only in {}", rel.display(), b.display()));
+        }
+    }
+    Ok(report)
+}

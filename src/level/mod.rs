@@ -1,0 +1,136 @@
+//! One level of the multiscale representation: a sparse set of voxels with the
+//! method's 10 channels (METHOD.md section 1), as plain data.
+//!
+//! Channel order, named once here and nowhere else by bare number:
+//! offset (3), normal (3), colour (3), mask (1). See [`Channel`].
+
+pub mod dataset;
+pub mod edit;
+
+use glam::{DVec3, IVec3, Vec3};
+
+/// Where the normalised cube [-1, 1]^3 sits in the exemplar's own frame.
+/// `world = centre + normalised / scale`; scale = 2 / (bbox diagonal), so the
+/// exemplar's bounding-box diagonal has length 2 after normalisation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    /// Bounding-box centre of the exemplar, world units.
+    pub centre: DVec3,
+    /// Normalised units per world unit.
+    pub scale: f64,
+}
+
+impl Default for Frame {
+    fn default() -> Self {
+        Frame { centre: DVec3::ZERO, scale: 1.0 }
+    }
+}
+
+impl Frame {
+    pub fn to_world(&self, p: DVec3) -> DVec3 {
+        self.centre + p / self.scale
+    }
+    pub fn to_normalised(&self, p: DVec3) -> DVec3 {
+        (p - self.centre) * self.scale
+    }
+}
+
+/// The 10 feature channels in storage order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Channel {
+    Offset = 0,
+    Normal = 3,
+    Colour = 6,
+    Mask = 9,
+}
+
+impl Channel {
+    /// First index of this channel group in a 10-wide feature row.
+    pub const fn start(self) -> usize {
+        self as usize
+    }
+    /// Number of scalars in the group.
+    pub const fn width(self) -> usize {
+        match self {
+            Channel::Mask => 1,
+            _ => 3,
+        }
+    }
+}
+
+/// Width of a feature row: offset, normal, colour, mask.
+pub const FEATURE_CHANNELS: usize = 10;
+
+/// A sparse level. Voxel (i, j, k) covers `[i*vs, (i+1)*vs) - 1` per axis in
+/// normalised units, vs = 2 / resolution, so coarse voxel (i,j,k) has the
+/// children (2i+a, 2j+b, 2k+c). Struct of arrays, all of length `len()`.
+#[derive(Clone, Debug, Default)]
+pub struct Level {
+    /// 0 = coarsest.
+    pub index: usize,
+    /// Voxels per axis over [-1, 1].
+    pub resolution: u32,
+    pub coords: Vec<IVec3>,
+    /// Surface point relative to the voxel centre, voxel units, in [-0.5, 0.5].
+    pub offsets: Vec<Vec3>,
+    /// Unit normals.
+    pub normals: Vec<Vec3>,
+    /// RGB in [0, 1].
+    pub colours: Vec<Vec3>,
+    /// +1 for voxels that hold surface, -1 otherwise.
+    pub mask: Vec<f32>,
+    pub frame: Frame,
+}
+
+impl Level {
+    pub fn len(&self) -> usize {
+        self.coords.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.coords.is_empty()
+    }
+    /// Voxel size in normalised units.
+    pub fn voxel_size(&self) -> f64 {
+        2.0 / self.resolution as f64
+    }
+    /// Centre of voxel `c` in normalised units.
+    pub fn voxel_centre(&self, c: IVec3) -> DVec3 {
+        (c.as_dvec3() + DVec3::splat(0.5)) * self.voxel_size() - DVec3::ONE
+    }
+    /// Surface point of voxel `i` in normalised units.
+    pub fn point_normalised(&self, i: usize) -> DVec3 {
+        self.voxel_centre(self.coords[i]) + self.offsets[i].as_dvec3() * self.voxel_size()
+    }
+    /// Surface point of voxel `i` in the exemplar's frame (world units).
+    pub fn point_world(&self, i: usize) -> DVec3 {
+        self.frame.to_world(self.point_normalised(i))
+    }
+    /// Rows of 10 features in [`Channel`] order (colour kept in [0,1] here;
+    /// the network's `2*(2c-1)` scaling belongs to the learning modules).
+    pub fn feature_rows(&self) -> Vec<[f32; FEATURE_CHANNELS]> {
+        (0..self.len())
+            .map(|i| {
+                let (o, n, c) = (self.offsets[i], self.normals[i], self.colours[i]);
+                [o.x, o.y, o.z, n.x, n.y, n.z, c.x, c.y, c.z, self.mask[i]]
+            })
+            .collect()
+    }
+    /// The first voxel with a NaN or infinite offset, normal, colour or mask.
+    pub fn first_non_finite(&self) -> Option<usize> {
+        (0..self.len()).find(|&i| {
+            !(self.offsets[i].is_finite()
+                && self.normals[i].is_finite()
+                && self.colours[i].is_finite()
+                && self.mask[i].is_finite())
+        })
+    }
+    /// Keep only the voxels for which `keep` is true.
+    pub fn retain(&mut self, keep: impl Fn(usize) -> bool) {
+        let idx: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();
+        self.coords = idx.iter().map(|&i| self.coords[i]).collect();
+        self.offsets = idx.iter().map(|&i| self.offsets[i]).collect();
+        self.normals = idx.iter().map(|&i| self.normals[i]).collect();
+        self.colours = idx.iter().map(|&i| self.colours[i]).collect();
+        self.mask = idx.iter().map(|&i| self.mask[i]).collect();
+    }
+}

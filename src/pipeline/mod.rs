@@ -1,0 +1,912 @@
+//! The stages as whole-folder operations, and `run`: encode -> train ->
+//! sample -> mesh -> preview -> evaluate in one output folder, reusing every
+//! finished stage whose inputs and configuration are unchanged (each stage
+//! writes a stamp `stage_<name>.json` holding the digest of what it depended
+//! on, last, after its outputs).
+//!
+//! Folder layout of a run:
+//! ```text
+//! OUT/config.toml                  the resolved configuration
+//! OUT/exemplar/                    encoded levels + manifest.json (+ previews)
+//! OUT/models/                      checkpoints, training state, loss plots
+//! OUT/variants/variant_000/        level_K.vdb, level_K.png, mesh.ply, mesh.png (+ mesh.glb: [mesh] glb)
+//! OUT/eval.json                    metrics
+//! OUT/contact_sheet.png            the exemplar and the variants, one camera
+//! OUT/logs/                        logs of sampling/meshing child processes
+//! ```
+
+pub mod batch;
+pub mod cluster;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::{Config, MeshConfig};
+use crate::level::dataset;
+use crate::encode::{self, EncodeOptions, Pooling};
+use crate::error::{write_atomically, Error, Result};
+use crate::level::Level;
+use crate::io::mesh::Mesh;
+use crate::render::{self, RenderOptions};
+use crate::learn::sample::{self, SampleOptions};
+use crate::learn::train;
+use crate::io::vdb::{self, Provenance, WriteOptions};
+
+/// Stamp of a finished stage.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Stamp {
+    digest: String,
+    seconds: f64,
+}
+
+fn stamp_path(dir: &Path, stage: &str) -> PathBuf {
+    dir.join(format!("stage_{stage}.json"))
+}
+
+/// Whether `stage` finished in `dir` with the same digest.
+fn is_done(dir: &Path, stage: &str, digest: &str) -> bool {
+    read_stamp(dir, stage).is_some_and(|s| s.digest == digest)
+}
+
+/// The stamp `stage` left in `dir`, if there is one and it reads.
+fn read_stamp(dir: &Path, stage: &str) -> Option<Stamp> {
+    serde_json::from_str(&std::fs::read_to_string(stamp_path(dir, stage)).ok()?).ok()
+}
+
+fn mark_done(dir: &Path, stage: &str, digest: &str, seconds: f64) -> Result<()> {
+    let path = stamp_path(dir, stage);
+    let text = serde_json::to_string(&Stamp { digest: digest.into(), seconds }).expect("stamp serialises");
+    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))
+}
+
+fn digest(parts: &[&str]) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    for p in parts {
+        h.update(p.as_bytes());
+        h.update([0u8]);
+    }
+    h.finalize().iter().take(8).map(|b| format!("{b:02x}")).collect()
+}
+
+pub fn encode_options(config: &Config) -> EncodeOptions {
+    EncodeOptions {
+        sampling_resolution: config.encode.sampling_resolution,
+        coarsest_resolution: config.encode.coarsest_resolution,
+        finest_resolution: config.encode.finest_resolution,
+        pooling: if config.encode.pooling == "average" { Pooling::Average } else { Pooling::Qem },
+        ..Default::default()
+    }
+}
+
+/// Preview options for the pipeline's pictures.
+pub fn preview_options() -> RenderOptions {
+    RenderOptions { width: 640, height: 640, ..Default::default() }
+}
+
+/// Encodes the mesh file `mesh_path` into `dir` (the `encode` command, one
+/// file of a batch): level files, previews if asked, manifest.json.
+pub fn encode_file(
+    mesh_path: &Path,
+    dir: &Path,
+    options: &EncodeOptions,
+    previews: Option<&RenderOptions>,
+    write: WriteOptions,
+) -> Result<dataset::Manifest> {
+    let mesh = crate::io::mesh::load(mesh_path)?;
+    let digest = dataset::file_sha256(mesh_path)?;
+    let (levels, stats) = encode::encode(&mesh, options).map_err(|e| Error::file(mesh_path, e.to_string()))?;
+    let source = mesh_path.display().to_string();
+    let manifest = dataset::write(dir, &mesh, &source, &digest, &levels, options, &stats, previews, write)?;
+    log::info!(
+        "encoded {source} in {:.2} s: {}",
+        stats.total_s,
+        manifest.levels.iter().map(|l| format!("{}^3: {} voxels", l.resolution, l.voxels)).collect::<Vec<_>>().join(", ")
+    );
+    Ok(manifest)
+}
+
+/// Encodes `mesh` into `dir` unless already done with the same source and
+/// options. Returns the levels.
+pub fn encode_stage(mesh: &Mesh, source: &str, source_sha: &str, config: &Config, dir: &Path) -> Result<Vec<Level>> {
+    let d = digest(&[source_sha, &config.stage_digest("encode")]);
+    if is_done(dir, "encode", &d) {
+        log::info!("encode: reusing {}", dir.display());
+        return Ok(dataset::read(dir)?.1);
+    }
+    let t = Instant::now();
+    let options = encode_options(config);
+    let (levels, stats) = encode::encode(mesh, &options)?;
+    dataset::write(dir, mesh, source, source_sha, &levels, &options, &stats, Some(&preview_options()), config.output.write_options())?;
+    log::info!(
+        "encode: {} levels in {:.1} s ({})",
+        levels.len(),
+        stats.total_s,
+        levels.iter().map(|l| format!("{}^3 {}", l.resolution, l.len())).collect::<Vec<_>>().join(", ")
+    );
+    mark_done(dir, "encode", &d, t.elapsed().as_secs_f64())?;
+    Ok(levels)
+}
+
+/// What level `k`'s trained models depend on.
+fn train_digest(source_sha: &str, config: &Config, k: usize) -> String {
+    digest(&[source_sha, &config.stage_digest("train"), &k.to_string()])
+}
+
+/// The levels whose training is not finished (no stamp for this exemplar and
+/// configuration) in `models`.
+pub fn levels_to_train(level_count: usize, source_sha: &str, config: &Config, models: &Path) -> Vec<usize> {
+    (0..level_count)
+        .filter(|&k| !is_done(models, &format!("train_level_{k}"), &train_digest(source_sha, config, k)))
+        .collect()
+}
+
+/// Trains the levels not yet trained of a run folder as concurrent child
+/// processes, each running `exe --threads T stage train OUT --level K` exactly
+/// as a cluster task does (so the weights are those of a sequential run:
+/// every step reseeds its own process's generators). See
+/// [`train_in_processes`]. Returns the levels trained.
+pub fn train_concurrently(
+    paths: &RunPaths,
+    config: &Config,
+    exe: &Path,
+    threads: i32,
+    device: &str,
+    jobs: usize,
+    progress: bool,
+) -> Result<Vec<usize>> {
+    let (manifest, levels) = dataset::read(&paths.exemplar())?;
+    let models = paths.models();
+    record_config(&models, config)?;
+    let todo = levels_to_train(levels.len(), &manifest.source_sha256, config, &models);
+    train_in_processes(&models, &todo, config, jobs, progress, |k| {
+        let mut c = std::process::Command::new(exe);
+        c.args(["--threads", &threads.to_string(), "stage", "train"])
+            .arg(&paths.root)
+            .args(["--level", &k.to_string(), "--device", device]);
+        c
+    })?;
+    Ok(todo)
+}
+
+/// Runs `child(k)` for every level in `todo`, at most `jobs` at a time, the
+/// finest (costliest) levels first; each child's stderr goes to
+/// `models/level_K_train.log`, and `progress` draws one bar per level from
+/// those logs. Fails, after the running children end, naming every level
+/// whose process failed and the last line of its log.
+pub fn train_in_processes(
+    models: &Path,
+    todo: &[usize],
+    config: &Config,
+    jobs: usize,
+    progress: bool,
+    child: impl Fn(usize) -> std::process::Command,
+) -> Result<()> {
+    let mut queue: Vec<usize> = todo.to_vec();
+    queue.sort_unstable(); // popped from the end: finest first
+    let tc = &config.train;
+    let total = |k: usize| if k == 0 { tc.level0_iterations } else { tc.upsampler_iterations + tc.upper_iterations };
+    let bars = indicatif::MultiProgress::with_draw_target(if progress {
+        indicatif::ProgressDrawTarget::stderr()
+    } else {
+        indicatif::ProgressDrawTarget::hidden()
+    });
+    let style = indicatif::ProgressStyle::with_template("level {prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} {msg}")
+        .expect("valid template");
+    let mut running: Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)> = Vec::new();
+    let result = schedule(models, &mut queue, &mut running, jobs, &bars, &style, &total, &child);
+    if result.is_err() {
+        // Leave no orphan training on: stop the children still running.
+        for (_, process, bar, _) in running.iter_mut() {
+            let _ = process.kill();
+            let _ = process.wait();
+            bar.abandon_with_message("stopped");
+        }
+    }
+    result?;
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn schedule(
+    models: &Path,
+    queue: &mut Vec<usize>,
+    running: &mut Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)>,
+    jobs: usize,
+    bars: &indicatif::MultiProgress,
+    style: &indicatif::ProgressStyle,
+    total: &dyn Fn(usize) -> usize,
+    child: &dyn Fn(usize) -> std::process::Command,
+) -> Result<()> {
+    let mut failed: Vec<String> = Vec::new();
+    let t0 = Instant::now();
+    let count = queue.len();
+    while !queue.is_empty() || !running.is_empty() {
+        while running.len() < jobs.max(1) && failed.is_empty() {
+            let Some(k) = queue.pop() else { break };
+            let log_path = models.join(format!("level_{k}_train.log"));
+            let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
+            let process = child(k)
+                .stdout(std::process::Stdio::null())
+                .stderr(log)
+                .spawn()
+                .map_err(|e| Error::Invalid(format!("cannot start the training process of level {k} ({e})")))?;
+            let bar = bars.add(indicatif::ProgressBar::new(total(k) as u64));
+            bar.set_style(style.clone());
+            bar.set_prefix(k.to_string());
+            running.push((k, process, bar, log_path));
+        }
+        if !failed.is_empty() {
+            queue.clear(); // start nothing more after a failure
+        }
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        let mut i = 0;
+        while i < running.len() {
+            let (k, process, bar, log_path) = &mut running[i];
+            bar.set_position(steps_logged(log_path) as u64);
+            match process.try_wait().map_err(|e| Error::Invalid(format!("level {k} training: {e}")))? {
+                None => i += 1,
+                Some(status) => {
+                    if status.success() {
+                        bar.finish_with_message("done");
+                    } else {
+                        let text = std::fs::read_to_string(&*log_path).unwrap_or_default();
+                        let last = text.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no output").to_string();
+                        failed.push(format!("level {k} training failed ({status}): {last} (log: {})", log_path.display()));
+                        bar.abandon_with_message("failed");
+                    }
+                    running.swap_remove(i);
+                }
+            }
+        }
+    }
+    if !failed.is_empty() {
+        return Err(Error::Invalid(failed.join("; ")));
+    }
+    log::info!("train: {count} levels on {} processes in {:.0} s", jobs.max(1), t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// Runs shards `0..n` of a stage as at most `jobs` concurrent child processes,
+/// `child(first, count)` building each one's command (e.g. `stage sample OUT
+/// --first K -n N`), with `jobs` contiguous shards of near-equal size. Each
+/// child's stderr goes to `log_dir/<what>_K.log`; fails naming every shard
+/// that failed and the last line of its log.
+pub fn run_shards(
+    n: usize,
+    jobs: usize,
+    log_dir: &Path,
+    what: &str,
+    child: impl Fn(usize, usize) -> std::process::Command,
+) -> Result<()> {
+    let jobs = jobs.clamp(1, n.max(1));
+    let mut running = Vec::new();
+    let mut first = 0;
+    for j in 0..jobs {
+        let count = n / jobs + usize::from(j < n % jobs);
+        if count == 0 {
+            continue;
+        }
+        let log_path = log_dir.join(format!("{what}_{first}.log"));
+        let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
+        let spawned = child(first, count).stdout(std::process::Stdio::null()).stderr(log).spawn();
+        match spawned {
+            Ok(c) => running.push((first, c, log_path)),
+            Err(e) => {
+                for (_, c, _) in running.iter_mut() {
+                    let _ = c.kill();
+                    let _ = c.wait();
+                }
+                return Err(Error::Invalid(format!("cannot start a {what} process ({e})")));
+            }
+        }
+        first += count;
+    }
+    let mut failed = Vec::new();
+    for (first, mut c, log_path) in running {
+        let status = c.wait().map_err(|e| Error::Invalid(format!("{what} shard {first}: {e}")))?;
+        if !status.success() {
+            let text = std::fs::read_to_string(&log_path).unwrap_or_default();
+            let last = text.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no output").to_string();
+            failed.push(format!("{what} from variant {first} failed ({status}): {last} (log: {})", log_path.display()));
+        }
+    }
+    if failed.is_empty() {
+        Ok(())
+    } else {
+        Err(Error::Invalid(failed.join("; ")))
+    }
+}
+
+/// Steps a training log reports (upsampler steps, then diffusion steps,
+/// from the "<phase> step X/Y" lines written every tenth of a phase).
+fn steps_logged(log: &Path) -> usize {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    let mut upsampler = 0;
+    let mut diffusion = 0;
+    for line in text.lines() {
+        let Some((head, rest)) = line.split_once(" step ") else { continue };
+        let Some(done) = rest.split('/').next().and_then(|v| v.trim().parse::<usize>().ok()) else { continue };
+        if head.ends_with("upsampler") {
+            upsampler = done;
+        } else if head.ends_with("diffusion") {
+            diffusion = done;
+        }
+    }
+    upsampler + diffusion
+}
+
+/// Trains the given levels (all when `only` is None) into `models_dir`,
+/// resuming any level that was interrupted.
+pub fn train_stage(
+    levels: &[Level],
+    source_sha: &str,
+    config: &Config,
+    device: tch::Device,
+    models_dir: &Path,
+    only: Option<usize>,
+    progress: bool,
+) -> Result<Vec<train::TrainReport>> {
+    std::fs::create_dir_all(models_dir).map_err(|e| Error::file(models_dir, e.to_string()))?;
+    let which: Vec<usize> = match only {
+        Some(k) if k >= levels.len() => {
+            return Err(Error::Invalid(format!("--level {k}: the exemplar has levels 0..{}", levels.len() - 1)))
+        }
+        Some(k) => vec![k],
+        None => (0..levels.len()).collect(),
+    };
+    let mut reports = Vec::new();
+    for k in which {
+        let d = train_digest(source_sha, config, k);
+        let stage = format!("train_level_{k}");
+        if is_done(models_dir, &stage, &d) {
+            log::info!("train level {k}: reusing {}", models_dir.display());
+            continue;
+        }
+        let t = Instant::now();
+        // Resume whatever a previous (killed) run of this level left.
+        let resume = train::state_path(models_dir, k).exists();
+        let r = train::train_level(levels, k, config, device, models_dir, resume, progress)?;
+        log::info!(
+            "train level {k}: {} + {} steps in {:.0} s, loss {:.4} -> {:.4}",
+            r.upsampler_steps,
+            r.diffusion_steps,
+            r.seconds,
+            r.diffusion_loss_start,
+            r.diffusion_loss_end
+        );
+        if r.finished {
+            mark_done(models_dir, &stage, &d, t.elapsed().as_secs_f64())?;
+        }
+        reports.push(r);
+    }
+    Ok(reports)
+}
+
+pub fn variant_dir(variants_dir: &Path, i: usize) -> PathBuf {
+    variants_dir.join(format!("variant_{i:03}"))
+}
+
+/// Writes one variant's levels (and previews) into its folder.
+pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, previews: bool, write: WriteOptions) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    // What an earlier sampling left (levels that are now empty, a mesh of
+    // other levels) must not be read as part of this variant.
+    for e in std::fs::read_dir(dir).map_err(|e| Error::file(dir, e.to_string()))?.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let stale = (name.starts_with("level_") && (name.ends_with(".vdb") || name.ends_with(".png")))
+            || name.starts_with("mesh.")
+            || name.starts_with("stage_");
+        if stale {
+            std::fs::remove_file(e.path()).map_err(|err| Error::file(&e.path(), err.to_string()))?;
+        }
+    }
+    for level in levels {
+        if level.is_empty() {
+            log::warn!("{}: level {} is empty after pruning", dir.display(), level.index);
+            continue;
+        }
+        vdb::write_level(&dir.join(dataset::level_file_name(level.index)), level, provenance, write)?;
+        if previews {
+            let img = render::render_level(level, &preview_options())?;
+            render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
+        }
+    }
+    Ok(())
+}
+
+/// Samples variants `options.first .. first + n` into
+/// `variants_dir/variant_XXX/` (XXX = the variant's index). Each variant
+/// folder is stamped on its own, so shards written by different jobs fill one
+/// folder and a re-run skips what is already there.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_stage(
+    exemplar_levels: &[Level],
+    exemplar_name: &str,
+    exemplar_open: bool,
+    config: &Config,
+    device: tch::Device,
+    models_dir: &Path,
+    variants_dir: &Path,
+    options: &SampleOptions,
+    previews: bool,
+) -> Result<Vec<PathBuf>> {
+    let indices: Vec<usize> = (options.first..options.first + options.n).collect();
+    let dirs: Vec<PathBuf> = indices.iter().map(|&i| variant_dir(variants_dir, i)).collect();
+    // What a variant depends on: the configuration, the trained models, the
+    // sampling options except which shard computed it, and its index.
+    let common = digest(&[
+        &config.stage_digest("sample"),
+        &std::fs::read_to_string(train::state_path(models_dir, exemplar_levels.len() - 1)).unwrap_or_default(),
+        &format!("{:?}", SampleOptions { first: 0, n: 0, ..options.clone() }),
+    ]);
+    let todo: Vec<usize> = indices
+        .iter()
+        .zip(&dirs)
+        .filter(|(i, d)| !is_done(d, "sample", &digest(&[&common, &i.to_string()])))
+        .map(|(&i, _)| i)
+        .collect();
+    if todo.is_empty() {
+        log::info!("sample: reusing {} variants in {}", dirs.len(), variants_dir.display());
+        return Ok(dirs);
+    }
+    let t = Instant::now();
+    let levels = options.stop_level.map_or(exemplar_levels.len(), |k| k + 1);
+    let models = sample::load_models(models_dir, config, levels, device)?;
+    let provenance = Provenance {
+        exemplar: exemplar_name.into(),
+        seed: Some(options.seed),
+        config_digest: config.digest(),
+        exemplar_open,
+    };
+    for &i in &todo {
+        let tv = Instant::now();
+        let one = SampleOptions { first: i, n: 1, ..options.clone() };
+        let v = sample::sample(&models, exemplar_levels, &one, None)?;
+        let dir = variant_dir(variants_dir, i);
+        write_variant(&dir, &v[0], &provenance, previews, config.output.write_options())?;
+        mark_done(&dir, "sample", &digest(&[&common, &i.to_string()]), tv.elapsed().as_secs_f64())?;
+    }
+    log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
+    Ok(dirs)
+}
+
+/// Writes the resolved configuration into a folder (`config.toml`).
+pub fn record_config(dir: &Path, config: &Config) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    let path = dir.join("config.toml");
+    let text = config.to_toml();
+    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))
+}
+
+/// The surface voxels (mask > 0) of a level as oriented coloured points in
+/// the exemplar's frame; spacing = the level's voxel size in world units. An
+/// error when there are none (nothing to mesh or write).
+pub fn oriented_points(level: &Level) -> Result<crate::recon::OrientedPoints> {
+    let keep: Vec<usize> = (0..level.len()).filter(|&i| level.mask[i] > 0.0).collect();
+    if keep.is_empty() {
+        return Err(Error::Invalid("the level has no active voxels (mask > 0)".into()));
+    }
+    Ok(crate::recon::OrientedPoints {
+        positions: keep.iter().map(|&i| level.point_world(i).as_vec3()).collect(),
+        normals: keep.iter().map(|&i| level.normals[i].normalize_or_zero()).collect(),
+        colours: keep.iter().map(|&i| level.colours[i]).collect(),
+        spacing: (level.voxel_size() / level.frame.scale) as f32,
+    })
+}
+
+/// Meshes a level: Poisson for closed exemplars, APSS for open ones unless
+/// `method` says otherwise. `resolution`: contouring grid cells along the
+/// longest axis; None: the method's default (Poisson 256, APSS 512).
+pub fn mesh_level(
+    level: &Level,
+    exemplar_open: bool,
+    method: Option<crate::recon::Method>,
+    resolution: Option<u32>,
+) -> Result<(Mesh, crate::recon::Method)> {
+    use crate::recon::{self, ApssOptions, Method, PoissonOptions};
+    let method = method.unwrap_or(if exemplar_open { Method::Apss } else { Method::Poisson });
+    let points = oriented_points(level)?;
+    let (mut poisson, mut apss) = (PoissonOptions::default(), ApssOptions::default());
+    if let Some(resolution) = resolution {
+        (poisson.resolution, apss.resolution) = (resolution, resolution);
+    }
+    let m = recon::reconstruct(&points, method, &poisson, &apss).map_err(|e| Error::Invalid(e.to_string()))?;
+    let mesh = Mesh {
+        name: "mesh".into(),
+        positions: m.positions,
+        triangles: m.triangles,
+        colours: crate::io::mesh::MeshColours::PerVertex(m.colours),
+        texture: None,
+    };
+    Ok((mesh, method))
+}
+
+/// Meshes the finest level of every variant folder into `mesh.ply` (and
+/// `mesh.glb` when `settings.glb`), decimated to `settings.faces` triangles
+/// when that is not 0, and `mesh.png`; a variant that fails to mesh is
+/// reported and skipped.
+pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settings: &MeshConfig) -> Result<usize> {
+    let mut done = 0;
+    for dir in dirs {
+        let t = Instant::now();
+        // The mesh depends on the finest level's data: its file's digest,
+        // checked before anything is read (a finished mesh costs one hash).
+        let finest_file = match crate::eval::evaluate::level_files(dir) {
+            Ok(files) => files[files.len() - 1].1.clone(),
+            Err(e) => {
+                log::warn!("not meshed: {e}");
+                continue;
+            }
+        };
+        let out = dir.join("mesh.ply");
+        let glb = dir.join("mesh.glb");
+        let d = digest(&[
+            &dataset::file_sha256(&finest_file).unwrap_or_default(),
+            &resolution.to_string(),
+            &exemplar_open.to_string(),
+            &settings.faces.to_string(),
+            &settings.glb.to_string(),
+        ]);
+        if is_done(dir, "mesh", &d) && out.is_file() && (glb.is_file() || !settings.glb) {
+            done += 1;
+            continue;
+        }
+        let finest = match vdb::read_level(&finest_file) {
+            Ok((level, _)) => level,
+            Err(e) => {
+                log::warn!("not meshed: {e}");
+                continue;
+            }
+        };
+        // No glTF file from an earlier setting beside a new mesh.ply.
+        let _ = std::fs::remove_file(&glb);
+        match mesh_level(&finest, exemplar_open, None, Some(resolution)).and_then(|(m, _)| light_mesh(m, settings.faces)) {
+            Ok(mesh) => {
+                crate::io::mesh::save(&mesh, &out, true)?;
+                if settings.glb {
+                    crate::io::mesh::save(&mesh, &glb, true)?;
+                }
+                let img = render::render_mesh(&mesh, &preview_options())?;
+                render::save_png(&img, &dir.join("mesh.png"))?;
+                mark_done(dir, "mesh", &d, t.elapsed().as_secs_f64())?;
+                done += 1;
+            }
+            Err(e) => {
+                // No mesh rather than a stale one.
+                let _ = std::fs::remove_file(&out);
+                log::warn!("{}: not meshed: {e}", dir.display());
+            }
+        }
+    }
+    Ok(done)
+}
+
+/// `mesh` decimated to `faces` triangles (0: as it is), with a log line
+/// saying what the decimation did.
+pub fn light_mesh(mesh: Mesh, faces: usize) -> Result<Mesh> {
+    if faces == 0 {
+        return Ok(mesh);
+    }
+    let t = std::time::Instant::now();
+    let (light, report) = crate::io::mesh::decimate(&mesh, &crate::io::mesh::DecimateOptions::new(faces))?;
+    log::info!(
+        "decimated {} -> {} triangles (budget {faces}, {} sharp edges kept) in {:.1} s",
+        report.faces_before,
+        report.faces_after,
+        report.feature_edges,
+        t.elapsed().as_secs_f64()
+    );
+    if report.faces_after > faces {
+        log::warn!("{} triangles remain above the budget of {faces}: no further collapse was legal", report.faces_after);
+    }
+    Ok(light)
+}
+
+/// The finest level in a folder of `level_K.vdb` files (a variant folder, an
+/// encoded exemplar, a ladder rung), with the folder's name.
+pub fn finest_in(dir: &Path) -> Result<(String, Level)> {
+    let files = crate::eval::evaluate::level_files(dir)?;
+    let (finest, _) = vdb::read_level(&files[files.len() - 1].1)?;
+    let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    Ok((name, finest))
+}
+
+/// Most entries on one contact sheet (the reference and 35 more): a larger set
+/// would make an image no one can read, and one over the size limit.
+pub const SHEET_MAX: usize = 36;
+
+/// Writes `OUT/contact_sheet.png` of (name, level) pairs, the first the
+/// reference; past [`SHEET_MAX`] entries, the first ones.
+pub fn write_contact_sheet(path: &Path, entries: &[(String, Level)]) -> Result<()> {
+    if entries.len() > SHEET_MAX {
+        log::info!("contact sheet: the first {} of {} shapes", SHEET_MAX, entries.len());
+    }
+    let refs: Vec<(String, &Level)> = entries.iter().take(SHEET_MAX).map(|(n, l)| (n.clone(), l)).collect();
+    let sheet = render::contact_sheet(&refs, &render::SheetOptions::default())?;
+    render::save_png(&sheet, path)?;
+    Ok(())
+}
+
+/// The degradation ladder of an encoded exemplar, scored.
+#[derive(Clone, Debug, Serialize)]
+pub struct LadderOutcome {
+    pub options: crate::eval::ladder::LadderOptions,
+    pub evaluation: crate::eval::evaluate::Evaluation,
+    /// Every expectation on every rung, and whether it held.
+    pub checks: Vec<crate::eval::ladder::CheckResult>,
+    /// Rungs that could not be scored, and why.
+    pub skipped: Vec<String>,
+}
+
+impl LadderOutcome {
+    pub fn failed(&self) -> impl Iterator<Item = &crate::eval::ladder::CheckResult> {
+        self.checks.iter().filter(|c| !c.ok)
+    }
+}
+
+/// Builds the ladder of the encoded exemplar in `exemplar_dir` into `out`
+/// (one folder per rung, `contact_sheet.png`, `ladder.json`), scores every
+/// rung as a variant and checks the expected order. With `config`, the
+/// `untrained` rung is sampled from freshly initialised networks of that
+/// configuration.
+pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, device: tch::Device) -> Result<LadderOutcome> {
+    use crate::eval::ladder::{self, LadderOptions, Rung};
+    let (manifest, levels) = dataset::read(exemplar_dir)?;
+    let options = LadderOptions::default();
+    let mut rungs = ladder::degrade(&levels, &options)?;
+    let mut skipped = Vec::new();
+    match config {
+        Some(config) => {
+            let t = Instant::now();
+            let untrained = sample::untrained_models(config, levels.len(), device, options.seed).and_then(|m| {
+                sample::sample(&m, &levels, &SampleOptions::from_config(config, 1, options.seed), None)
+            });
+            match untrained {
+                Ok(mut v) if v.first().and_then(|l| l.last()).is_some_and(|l| l.len() > 0 && l.index + 1 == levels.len()) => {
+                    log::info!("ladder: untrained networks sampled in {:.1} s", t.elapsed().as_secs_f64());
+                    rungs.push((Rung::Untrained, v.swap_remove(0)));
+                }
+                Ok(_) => skipped.push("untrained: every voxel was pruned before the finest level (nothing to score)".into()),
+                Err(e) => skipped.push(format!("untrained: {e}")),
+            }
+        }
+        None => skipped.push("untrained: no configuration (no models folder, no --profile)".into()),
+    }
+    let provenance = Provenance {
+        exemplar: manifest.exemplar.clone(),
+        seed: Some(options.seed),
+        config_digest: config.map(|c| c.digest()).unwrap_or_default(),
+        exemplar_open: manifest.open_surface,
+    };
+    if !rungs.iter().any(|(r, _)| *r == Rung::Untrained) {
+        let _ = std::fs::remove_dir_all(out.join(Rung::Untrained.name()));
+    }
+    ladder::write_rungs(out, &rungs, &provenance)?;
+    let files: Vec<crate::eval::evaluate::VariantFiles> = rungs
+        .iter()
+        .map(|(r, l)| crate::eval::evaluate::VariantFiles {
+            name: r.name().into(),
+            finest: l[l.len() - 1].clone(),
+            coarsest: l[0].clone(),
+            mesh: None,
+        })
+        .collect();
+    let evaluation = crate::eval::evaluate::evaluate(exemplar_dir, None, &files, 256)?;
+    skipped.extend(evaluation.unscored.iter().cloned());
+    let finest = &levels[levels.len() - 1];
+    let colourful = crate::eval::metrics::colour::spread(&finest.colours) > 0.02;
+    if !colourful {
+        skipped.push("colour expectations: the exemplar has one colour (nothing to wash out or shuffle)".into());
+    }
+    let checks = ladder::check(&evaluation.report.variants, colourful);
+    let entries: Vec<(String, Level)> = files.into_iter().map(|f| (f.name, f.finest)).collect();
+    write_contact_sheet(&out.join("contact_sheet.png"), &entries)?;
+    let outcome = LadderOutcome { options, evaluation, checks, skipped };
+    let path = out.join("ladder.json");
+    let text = serde_json::to_string_pretty(&outcome).map_err(|e| Error::file(&path, e.to_string()))?;
+    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))?;
+    Ok(outcome)
+}
+
+/// The folders and files of a run (see the module documentation), shared by
+/// `run` (every stage in one process) and the `stage` commands (one stage per
+/// process, as a cluster job runs it).
+#[derive(Clone, Debug)]
+pub struct RunPaths {
+    pub root: PathBuf,
+}
+
+impl RunPaths {
+    pub fn new(root: &Path) -> Self {
+        RunPaths { root: root.to_path_buf() }
+    }
+    pub fn config(&self) -> PathBuf {
+        self.root.join("config.toml")
+    }
+    pub fn exemplar(&self) -> PathBuf {
+        self.root.join("exemplar")
+    }
+    pub fn models(&self) -> PathBuf {
+        self.root.join("models")
+    }
+    pub fn variants(&self) -> PathBuf {
+        self.root.join("variants")
+    }
+    pub fn eval_json(&self) -> PathBuf {
+        self.root.join("eval.json")
+    }
+    pub fn contact_sheet(&self) -> PathBuf {
+        self.root.join("contact_sheet.png")
+    }
+    pub fn report(&self) -> PathBuf {
+        self.root.join("report.html")
+    }
+
+    /// The configuration `stage encode` (or `run`) recorded in the run folder.
+    pub fn read_config(&self) -> Result<Config> {
+        let p = self.config();
+        if !p.is_file() {
+            return Err(Error::file(&self.root, "has no config.toml: run `stage encode` (or `run`) into it first"));
+        }
+        Config::read(&p)
+    }
+}
+
+/// Where an exemplar comes from.
+pub enum ExemplarSource<'a> {
+    File(&'a Path),
+    /// The embedded demo tower.
+    Demo,
+}
+
+/// Stage 1: records the configuration in the run folder and encodes the
+/// exemplar into `OUT/exemplar` (the demo exemplar is also written as
+/// `exemplar.ply` and `exemplar.png`).
+/// Returns the exemplar's name as reports show it (its path, or the demo's) and
+/// its levels.
+pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> Result<(String, Vec<Level>)> {
+    let demo = matches!(source, ExemplarSource::Demo);
+    let (mesh, name, sha) = match source {
+        ExemplarSource::File(p) => (crate::io::mesh::load(p)?, p.display().to_string(), dataset::file_sha256(p)?),
+        ExemplarSource::Demo => {
+            let m = crate::encode::exemplar::ruined_tower(&Default::default());
+            let sha = dataset::mesh_sha256(&m);
+            (m, "(embedded demo exemplar)".to_string(), sha)
+        }
+    };
+    record_config(&paths.root, config)?;
+    if demo {
+        crate::io::mesh::save(&mesh, &paths.root.join("exemplar.ply"), true)?;
+        render::save_png(&render::render_mesh(&mesh, &preview_options())?, &paths.root.join("exemplar.png"))?;
+    }
+    let levels = encode_stage(&mesh, &name, &sha, config, &paths.exemplar())?;
+    Ok((name, levels))
+}
+
+/// Stage 2: trains every level (or `only` one, as one task of a job array)
+/// into `OUT/models`, resuming what a killed job left.
+pub fn run_train(paths: &RunPaths, config: &Config, device: tch::Device, only: Option<usize>, progress: bool) -> Result<Vec<train::TrainReport>> {
+    let (manifest, levels) = dataset::read(&paths.exemplar())?;
+    record_config(&paths.models(), config)?;
+    train_stage(&levels, &manifest.source_sha256, config, device, &paths.models(), only, progress)
+}
+
+/// Stage 3: samples variants `options.first ..` into `OUT/variants`.
+pub fn run_sample(paths: &RunPaths, config: &Config, device: tch::Device, options: &SampleOptions) -> Result<Vec<PathBuf>> {
+    let (manifest, levels) = dataset::read(&paths.exemplar())?;
+    sample_stage(&levels, &manifest.exemplar, manifest.open_surface, config, device, &paths.models(), &paths.variants(), options, true)
+}
+
+/// Stage 4: meshes the variants with indices in `range` that exist, as
+/// `settings` say (the configuration's `[mesh]`).
+pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>, settings: &MeshConfig) -> Result<usize> {
+    let manifest = dataset::read_manifest(&paths.exemplar())?;
+    let dirs: Vec<PathBuf> = range
+        .map(|i| variant_dir(&paths.variants(), i))
+        .filter(|d| {
+            let done = stamp_path(d, "sample").is_file();
+            if d.is_dir() && !done {
+                log::warn!("{}: its sampling did not finish: not meshed", d.display());
+            }
+            done
+        })
+        .collect();
+    mesh_stage(&dirs, manifest.open_surface, 256, settings)
+}
+
+/// Stage 5: scores variants `0..n` against the exemplar into
+/// `OUT/eval.json`, and draws `OUT/contact_sheet.png`. `Ok(None)` (and a
+/// warning naming the cause, no eval.json) when no variant can be scored,
+/// e.g. every one was pruned away before the finest level.
+pub fn run_eval(paths: &RunPaths, n: usize) -> Result<Option<crate::eval::evaluate::Evaluation>> {
+    let (_, levels) = dataset::read(&paths.exemplar())?;
+    let dirs: Vec<PathBuf> = (0..n).map(|i| variant_dir(&paths.variants(), i)).collect();
+    if let Some(missing) = dirs.iter().find(|d| !stamp_path(d, "sample").is_file()) {
+        return Err(Error::file(missing, "is missing or its sampling did not finish: sample it first (did a sampling job fail?)"));
+    }
+    // A variant whose levels were all pruned away has no level file: reported, not scored.
+    let mut unreadable = Vec::new();
+    let mut files = Vec::new();
+    for d in &dirs {
+        match crate::eval::evaluate::read_variant(d) {
+            Ok(f) => files.push(f),
+            Err(e) => unreadable.push(e.to_string()),
+        }
+    }
+    let mut sheet = vec![("exemplar".to_string(), levels[levels.len() - 1].clone())];
+    sheet.extend(files.iter().map(|f| (f.name.clone(), f.finest.clone())));
+    write_contact_sheet(&paths.contact_sheet(), &sheet)?;
+    let evaluation = if files.is_empty() {
+        Err(Error::Invalid(format!("no variant can be scored: {}", unreadable.join("; "))))
+    } else {
+        crate::eval::evaluate::evaluate(&paths.exemplar(), None, &files, 256)
+    };
+    let evaluation = match evaluation {
+        Ok(mut e) => {
+            e.unscored.extend(unreadable);
+            e.write_json(&paths.eval_json())?;
+            Some(e)
+        }
+        Err(Error::Invalid(msg)) if msg.starts_with("no variant can be scored") => {
+            let _ = std::fs::remove_file(paths.eval_json());
+            log::warn!("evaluate: {msg}");
+            None
+        }
+        Err(e) => return Err(e),
+    };
+    write_report(paths, n, evaluation.as_ref())?;
+    Ok(evaluation)
+}
+
+/// Writes `OUT/report.html` from what the run folder holds: the contact
+/// sheet, `evaluation`'s table, a preview per variant (its mesh, else its
+/// finest level), the loss plots, the seconds each stage recorded, the
+/// configuration.
+pub fn write_report(paths: &RunPaths, n: usize, evaluation: Option<&crate::eval::evaluate::Evaluation>) -> Result<()> {
+    let read = |p: &Path| std::fs::read(p).ok();
+    let seconds = |dir: &Path, stage: &str| read_stamp(dir, stage).map(|s| s.seconds);
+    let config = paths.read_config()?;
+    let exemplar_name = dataset::read_manifest(&paths.exemplar()).map(|m| m.exemplar).unwrap_or_default();
+    let levels = config.levels();
+    let mut timings = Vec::new();
+    if let Some(t) = seconds(&paths.exemplar(), "encode") {
+        timings.push(("encode".to_string(), t));
+    }
+    for k in 0..levels {
+        if let Some(state) = train::read_state(&paths.models(), k) {
+            timings.push((format!("train level {k}"), state.seconds));
+        }
+    }
+    let dirs: Vec<PathBuf> = (0..n).map(|i| variant_dir(&paths.variants(), i)).collect();
+    for stage in ["sample", "mesh"] {
+        let recorded: Vec<f64> = dirs.iter().filter_map(|d| seconds(d, stage)).collect();
+        if !recorded.is_empty() {
+            timings.push((format!("{stage} ({} variants)", recorded.len()), recorded.iter().sum()));
+        }
+    }
+    let variants = dirs
+        .iter()
+        .filter_map(|d| {
+            let name = d.file_name()?.to_string_lossy().into_owned();
+            let finest = (0..levels).rev().map(|k| d.join(format!("level_{k}.png"))).find(|p| p.is_file());
+            let png = read(&d.join("mesh.png")).or_else(|| finest.and_then(|p| read(&p)))?;
+            Some((name, png))
+        })
+        .collect();
+    let inputs = render::report::ReportInputs {
+        title: format!("shapeshifter: {} ({})", exemplar_name, paths.root.display()),
+        contact_sheet: read(&paths.contact_sheet()),
+        eval_table: evaluation.map(|e| e.table()),
+        variants,
+        loss_plots: (0..levels).filter_map(|k| Some((k, read(&train::loss_plot_path(&paths.models(), k))?))).collect(),
+        timings,
+        config_toml: config.to_toml(),
+        config_digest: config.digest(),
+    };
+    let page = render::report::html(&inputs);
+    let path = paths.report();
+    write_atomically(&path, |tmp| std::fs::write(tmp, &page).map_err(|e| Error::file(&path, e.to_string())))
+}
