@@ -7,6 +7,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 use shapeshifter::encode::{EncodeOptions, Pooling};
+use shapeshifter::recon::Method;
 use shapeshifter::render::{self, RenderOptions};
 use shapeshifter::config::Config;
 use shapeshifter::learn::sample::{self, SampleOptions};
@@ -65,8 +66,8 @@ pub enum Command {
         #[arg(long, default_value_t = 256)]
         finest: u32,
         /// How children pool into parents.
-        #[arg(long, value_enum, default_value_t = PoolingArg::Qem)]
-        pooling: PoolingArg,
+        #[arg(long, value_enum, default_value_t = Pooling::Qem)]
+        pooling: Pooling,
         /// Also write level_K.png previews.
         #[arg(long)]
         preview: bool,
@@ -230,8 +231,10 @@ pub enum Command {
         /// Decimate to at most this many triangles (0: keep every triangle).
         #[arg(long, default_value_t = 0)]
         faces: usize,
-        #[arg(long, default_value = "auto")]
-        method: String,
+        /// Meshing method [default: APSS when the exemplar was an open
+        /// surface, Poisson otherwise].
+        #[arg(long, value_enum)]
+        method: Option<Method>,
         /// Contouring grid cells along the longest axis of the points' box
         /// [default: Poisson 256, APSS 512].
         #[arg(long, conflicts_with = "depth")]
@@ -475,14 +478,6 @@ pub struct BatchArgs {
     /// Print what happened to every input as JSON on stdout (for scripts).
     #[arg(long)]
     pub json: bool,
-}
-
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum PoolingArg {
-    /// Quadric error minimisation: keeps corners and creases sharp.
-    Qem,
-    /// Plain averaging of points (rounds corners; for comparison).
-    Average,
 }
 
 /// How previews look.
@@ -736,10 +731,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 sampling_resolution,
                 coarsest_resolution: coarsest,
                 finest_resolution: finest,
-                pooling: match pooling {
-                    PoolingArg::Qem => Pooling::Qem,
-                    PoolingArg::Average => Pooling::Average,
-                },
+                pooling,
                 ..Default::default()
             };
             options.validate().map_err(shapeshifter::Error::from)?;
@@ -901,10 +893,6 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             if !mesh::COLOUR_EXTENSIONS.contains(&ext.as_str()) {
                 anyhow::bail!("{}: mesh writes .ply or .glb (vertex colours), not '.{ext}'", output.display());
             }
-            let method = match method.as_str() {
-                "auto" => None,
-                m => Some(m.parse::<shapeshifter::recon::Method>().map_err(|e| anyhow::anyhow!("--method: {e}"))?),
-            };
             if several && preview.is_some() {
                 anyhow::bail!("--preview takes one input (several: run `render` on the meshes)");
             }

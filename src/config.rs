@@ -110,8 +110,8 @@ pub struct EncodeConfig {
     pub coarsest_resolution: u32,
     /// Resolution of the last level.
     pub finest_resolution: u32,
-    /// "qem" or "average".
-    pub pooling: String,
+    /// How children are pooled into a parent's surface point.
+    pub pooling: crate::encode::Pooling,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -144,8 +144,11 @@ pub struct TrainConfig {
     pub grad_clip: f64,
     /// Levels >= 1 use t in [0, upper_t_max].
     pub upper_t_max: f64,
-    /// "code" or "paper".
-    pub mixing: String,
+    /// Removed: the forward process is x_t = alpha x0 + sigma eps (the
+    /// released code's). Configurations recorded with `mixing = "code"` still
+    /// read; "paper" is refused (README, Configuration).
+    #[serde(default, skip_serializing, rename = "mixing")]
+    pub legacy_mixing: Option<String>,
     /// Learning-rate schedule of every phase: linear warm-up over this many
     /// steps, then cosine decay to `lr_final_ratio` times the rate at the
     /// phase's last step (0 and 1.0: a constant rate, the paper's).
@@ -165,8 +168,7 @@ pub struct TrainConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SampleConfig {
-    /// "ddpm" or "ddim".
-    pub sampler: String,
+    pub sampler: crate::learn::schedule::Sampler,
     pub level0_steps: usize,
     pub upper_steps: usize,
 }
@@ -273,14 +275,10 @@ impl Config {
                 "encode resolutions must satisfy coarsest <= finest <= sampling".into(),
             ));
         }
-        if !["qem", "average"].contains(&e.pooling.as_str()) {
-            return Err(Error::Invalid(format!("encode.pooling '{}' is not qem or average", e.pooling)));
-        }
-        if !["ddpm", "ddim"].contains(&self.sample.sampler.as_str()) {
-            return Err(Error::Invalid(format!("sample.sampler '{}' is not ddpm or ddim", self.sample.sampler)));
-        }
-        if !["code", "paper"].contains(&self.train.mixing.as_str()) {
-            return Err(Error::Invalid(format!("train.mixing '{}' is not code or paper", self.train.mixing)));
+        if let Some(m) = self.train.legacy_mixing.as_deref().filter(|m| *m != "code") {
+            return Err(Error::Invalid(format!(
+                "train.mixing = '{m}' is no longer supported (remove the line: the forward process is the released code's)"
+            )));
         }
         let m = &self.model;
         for k in [m.level0_first_kernel, m.upper_first_kernel] {
@@ -380,7 +378,7 @@ mod tests {
     fn overrides_apply_and_are_checked() {
         let c = Config::load("cpu", &["train.level0_iterations=7".into(), "sample.sampler=ddpm".into()]).unwrap();
         assert_eq!(c.train.level0_iterations, 7);
-        assert_eq!(c.sample.sampler, "ddpm");
+        assert_eq!(c.sample.sampler, crate::learn::schedule::Sampler::Ddpm);
         let c = Config::load("cpu", &["train.lr=1".into()]).unwrap();
         assert_eq!(c.train.lr, 1.0);
         assert!(Config::load("cpu", &["train.nothing=1".into()]).is_err());
@@ -395,7 +393,7 @@ mod tests {
         let a = Config::load("cpu", &["train.crop=17".into()]).unwrap();
         let b = a.with_overrides(&["sample.sampler=ddpm".into()]).unwrap();
         assert_eq!(b.train.crop, 17, "recorded values are kept");
-        assert_eq!(b.sample.sampler, "ddpm");
+        assert_eq!(b.sample.sampler, crate::learn::schedule::Sampler::Ddpm);
         assert_eq!(a.with_overrides(&[]).unwrap(), a);
         assert!(a.with_overrides(&["sample.sampler=euler".into()]).is_err());
     }

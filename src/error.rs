@@ -14,6 +14,14 @@ pub enum Error {
     Encode(#[from] crate::encode::EncodeError),
     #[error(transparent)]
     Render(#[from] crate::render::RenderError),
+    #[error(transparent)]
+    Grid(#[from] crate::learn::grid::GridError),
+    #[error(transparent)]
+    Sparse(#[from] crate::learn::sparse::SparseError),
+    #[error(transparent)]
+    Recon(#[from] crate::recon::ReconError),
+    #[error(transparent)]
+    Shape(#[from] crate::eval::metrics::DegenerateShape),
 }
 
 impl Error {

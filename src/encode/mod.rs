@@ -41,7 +41,8 @@ use crate::level::{Frame, Level};
 use crate::io::mesh::{Mesh, MeshColours, Texture};
 
 /// How 2x2x2 children are pooled into a parent's surface point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
 pub enum Pooling {
     /// Mean of the children's plane quadrics, minimised with a truncated
     /// pseudo-inverse around the voxel centre: keeps a corner's point on the corner

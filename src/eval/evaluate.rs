@@ -260,6 +260,6 @@ pub fn evaluate(
     if inputs.is_empty() {
         return Err(Error::Invalid(format!("no variant can be scored: {}", unscored.join("; "))));
     }
-    let report = metrics::evaluate(&exemplar, &inputs, &EvalParams::default()).map_err(|e| Error::Invalid(e.to_string()))?;
+    let report = metrics::evaluate(&exemplar, &inputs, &EvalParams::default())?;
     Ok(Evaluation { lattice: Lattice { voxelisation: mode, filled, dims: grid.dims, voxel: grid.voxel }, unscored, report })
 }

@@ -4,9 +4,11 @@
 //! training ([`train`]) and sampling ([`sample`]). Sampling reads checkpoints
 //! through [`checkpoint`]; it does not import training.
 
+pub mod checkpoint;
 pub mod grid;
 pub mod nn;
 pub mod sample;
 pub mod schedule;
+pub mod seed;
 pub mod sparse;
 pub mod train;

@@ -18,18 +18,11 @@ use crate::config::ModelConfig;
 use crate::learn::schedule::time_embedding_rows;
 use crate::error::{Error, Result};
 use crate::level::FEATURE_CHANNELS;
-use crate::learn::sparse::{upsample_trilinear, ConvTranspose2x, SparseDropout, SparseError, SparseTensor, SubmConv3d};
+use crate::learn::sparse::{upsample_trilinear, ConvTranspose2x, SparseDropout, SparseTensor, SubmConv3d};
 
 /// Width of the time embedding concatenated to each voxel's features.
 pub const TIME_CHANNELS: i64 = 6;
 
-/// A sparse-convolution error as the library's error.
-pub(crate) fn sparse_err(e: SparseError) -> Error {
-    match e {
-        SparseError::Torch(t) => Error::Torch(t),
-        other => Error::Invalid(other.to_string()),
-    }
-}
 
 /// The shape of a level's diffusion model, read from the configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -82,14 +75,14 @@ impl DiffusionNet {
         let c = shape.channels;
         let mut convs = Vec::with_capacity(shape.layers);
         let input = FEATURE_CHANNELS as i64 + TIME_CHANNELS;
-        convs.push(SubmConv3d::new(&(p / "conv0"), input, c, shape.first_kernel, true).map_err(sparse_err)?);
+        convs.push(SubmConv3d::new(&(p / "conv0"), input, c, shape.first_kernel, true)?);
         for i in 1..shape.layers {
-            convs.push(SubmConv3d::new(&(p / format!("conv{i}")), c, c, 3, true).map_err(sparse_err)?);
+            convs.push(SubmConv3d::new(&(p / format!("conv{i}")), c, c, 3, true)?);
         }
         let head = (0..shape.head_layers)
-            .map(|i| SubmConv3d::new(&(p / format!("head{i}")), c, c, 1, true).map_err(sparse_err))
+            .map(|i| SubmConv3d::new(&(p / format!("head{i}")), c, c, 1, true).map_err(Error::from))
             .collect::<Result<Vec<_>>>()?;
-        let out = SubmConv3d::new(&(p / "out"), c, FEATURE_CHANNELS as i64, 1, true).map_err(sparse_err)?;
+        let out = SubmConv3d::new(&(p / "out"), c, FEATURE_CHANNELS as i64, 1, true)?;
         Ok(DiffusionNet { convs, head, out, dropout: SparseDropout::new(dropout), shape })
     }
 
@@ -102,14 +95,14 @@ impl DiffusionNet {
             return Err(Error::Invalid(format!("time tensor of shape {:?} for {n} voxels", t.size())));
         }
         let emb = time_embedding_rows(&t.to_device(x.device()).to_kind(x.feats.kind()));
-        let mut h = x.with_feats(Tensor::cat(&[&x.feats, &emb], 1)).map_err(sparse_err)?;
+        let mut h = x.with_feats(Tensor::cat(&[&x.feats, &emb], 1))?;
         for conv in &self.convs {
-            h = self.dropout.forward_t(&conv.forward(&h).map_err(sparse_err)?, train).map(|f| f.silu());
+            h = self.dropout.forward_t(&conv.forward(&h)?, train).map(|f| f.silu());
         }
         for conv in &self.head {
-            h = conv.forward(&h).map_err(sparse_err)?.map(|f| f.silu());
+            h = conv.forward(&h)?.map(|f| f.silu());
         }
-        self.out.forward(&h).map_err(sparse_err)
+        self.out.forward(&h).map_err(Error::from)
     }
 
     /// [`Self::forward_t`] with one time for all voxels.
@@ -138,23 +131,23 @@ impl Upsampler {
     pub fn new(p: &nn::Path, channels: i64, dropout: f64) -> Result<Self> {
         let f = FEATURE_CHANNELS as i64;
         Ok(Upsampler {
-            conv_in: SubmConv3d::new(&(p / "conv_in"), f, channels, 3, true).map_err(sparse_err)?,
-            up: ConvTranspose2x::new(&(p / "up"), channels, channels, true).map_err(sparse_err)?,
-            mid: SubmConv3d::new(&(p / "mid"), channels, channels, 1, true).map_err(sparse_err)?,
-            out: SubmConv3d::new(&(p / "out"), channels, f, 1, true).map_err(sparse_err)?,
+            conv_in: SubmConv3d::new(&(p / "conv_in"), f, channels, 3, true)?,
+            up: ConvTranspose2x::new(&(p / "up"), channels, channels, true)?,
+            mid: SubmConv3d::new(&(p / "mid"), channels, channels, 1, true)?,
+            out: SubmConv3d::new(&(p / "out"), channels, f, 1, true)?,
             dropout: SparseDropout::new(dropout),
         })
     }
 
     pub fn forward_t(&self, coarse: &SparseTensor, train: bool) -> Result<SparseTensor> {
-        let x_up = upsample_trilinear(coarse).map_err(sparse_err)?;
+        let x_up = upsample_trilinear(coarse)?;
         let d = |x: SparseTensor| self.dropout.forward_t(&x, train).map(|f| f.relu());
-        let h = d(self.conv_in.forward(coarse).map_err(sparse_err)?);
-        let h = d(self.up.forward(&h).map_err(sparse_err)?);
-        let h = d(self.mid.forward(&h).map_err(sparse_err)?);
-        let h = self.out.forward(&h).map_err(sparse_err)?;
+        let h = d(self.conv_in.forward(coarse)?);
+        let h = d(self.up.forward(&h)?);
+        let h = d(self.mid.forward(&h)?);
+        let h = self.out.forward(&h)?;
         debug_assert!(std::sync::Arc::ptr_eq(&h.grid, &x_up.grid));
-        x_up.with_feats(&x_up.feats.detach() + &h.feats).map_err(sparse_err)
+        x_up.with_feats(&x_up.feats.detach() + &h.feats).map_err(Error::from)
     }
 }
 

@@ -27,13 +27,14 @@ use glam::IVec3;
 use tch::{Device, Kind, Tensor};
 
 use crate::config::Config;
-use crate::learn::schedule::{noise_to, reverse_times, sampler, Sampler};
+use crate::learn::schedule::{reverse_times, Sampler, Schedule};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
 use crate::level::{Level, FEATURE_CHANNELS};
-use crate::learn::nn::{new_diffusion, new_upsampler, sparse_err, DiffusionNet, LevelNet, Upsampler};
+use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::SparseTensor;
-use crate::learn::train::{diffusion_checkpoint, diffusion_ema_checkpoint, mix_seed, upsampler_checkpoint};
+use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
+use crate::learn::seed::{derive_seed, Stream};
 
 /// The trained networks of every level, read from a training folder.
 pub struct Models {
@@ -52,7 +53,7 @@ impl Models {
 }
 
 /// Loads the checkpoints of levels `0..levels` from `dir` (written by
-/// [`crate::learn::train::train_level`] with the same model configuration).
+/// `crate::learn::train::train_level` with the same model configuration).
 pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -> Result<Models> {
     if levels == 0 {
         return Err(Error::Invalid("no levels to load".into()));
@@ -113,8 +114,7 @@ pub struct SampleOptions {
     pub extent: [f32; 3],
     /// Last level to produce (inclusive); `None` = the finest trained level.
     pub stop_level: Option<usize>,
-    /// "ddpm" or "ddim".
-    pub sampler: String,
+    pub sampler: Sampler,
     pub level0_steps: usize,
     pub upper_steps: usize,
     /// Upper levels start from U_l(...) noised to this time.
@@ -130,7 +130,7 @@ impl SampleOptions {
             seed,
             extent: [1.0; 3],
             stop_level: None,
-            sampler: config.sample.sampler.clone(),
+            sampler: config.sample.sampler,
             level0_steps: config.sample.level0_steps,
             upper_steps: config.sample.upper_steps,
             upper_t_max: config.train.upper_t_max,
@@ -180,8 +180,6 @@ pub fn sample(
             models.levels() - 1
         )));
     }
-    let sampler =
-        sampler(&opts.sampler).ok_or_else(|| Error::Invalid(format!("unknown sampler '{}'", opts.sampler)))?;
     if let Some(level) = &from {
         let k = level.index;
         if k >= last {
@@ -200,7 +198,7 @@ pub fn sample(
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
-                let job = OneVariant { models, frame, last, box0, sampler: sampler.as_ref(), seed: variant_seed(opts.seed, i) };
+                let job = OneVariant { models, frame, last, box0, sampler: opts.sampler, schedule: Schedule::default(), seed: variant_seed(opts.seed, i) };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
             .collect()
@@ -211,7 +209,7 @@ pub fn sample(
 /// sampled one at a time from their own seeds, so any shard of indices
 /// (`--first K -n N`) reproduces exactly what one `sample -n` writes.
 pub fn variant_seed(run_seed: u64, index: usize) -> u64 {
-    mix_seed(run_seed, index as u64, 7, 0)
+    derive_seed(run_seed, index as u64, Stream::Variant, 0)
 }
 
 /// Standard normal noise of `rows` x 10 from SplitMix64 and Box-Muller on the
@@ -219,7 +217,7 @@ pub fn variant_seed(run_seed: u64, index: usize) -> u64 {
 /// global generator, of the batch and of the device, so a variant's noise is
 /// the same wherever and with whatever else it is sampled.
 fn gaussian(rows: usize, seed: u64, level: usize, step: usize, device: Device) -> Tensor {
-    let mut rng = crate::util::rng::Rng::new(mix_seed(seed, level as u64, 8, step as u64));
+    let mut rng = crate::util::rng::Rng::new(derive_seed(seed, level as u64, Stream::SamplingStep, step as u64));
     let n = rows * FEATURE_CHANNELS;
     let mut v = Vec::with_capacity(n + 1);
     while v.len() < n {
@@ -241,7 +239,8 @@ struct OneVariant<'a> {
     frame: crate::level::Frame,
     last: usize,
     box0: (IVec3, IVec3),
-    sampler: &'a dyn Sampler,
+    sampler: Sampler,
+    schedule: Schedule,
     seed: u64,
 }
 
@@ -252,16 +251,16 @@ impl OneVariant<'_> {
         let (mut cur, first) = match from {
             None => {
                 let (lo, size) = self.box0;
-                let bx = SparseGrid::full_box(resolution0, lo, size).map_err(|e| Error::Invalid(e.to_string()))?;
+                let bx = SparseGrid::full_box(resolution0, lo, size)?;
                 let noise = gaussian(bx.len(), self.seed, 0, 0, dev);
-                let x = SparseTensor::new(Arc::new(bx), noise).map_err(sparse_err)?;
+                let x = SparseTensor::new(Arc::new(bx), noise)?;
                 let x = self.reverse(0, x, 1.0, opts.level0_steps)?;
-                let pruned = x.prune_by_mask().map_err(sparse_err)?;
-                out.push(pruned.to_level(0, self.frame).map_err(sparse_err)?);
+                let pruned = x.prune_by_mask()?;
+                out.push(pruned.to_level(0, self.frame)?);
                 (pruned, 1)
             }
             Some(level) => {
-                let one = SparseTensor::from_level(level, dev).map_err(sparse_err)?.prune_by_mask().map_err(sparse_err)?;
+                let one = SparseTensor::from_level(level, dev)?.prune_by_mask()?;
                 (one, level.index + 1)
             }
         };
@@ -271,8 +270,8 @@ impl OneVariant<'_> {
                     Arc::new(SparseGrid::empty(cur.grid.resolution() * 2)),
                     Tensor::zeros([0, FEATURE_CHANNELS as i64], (Kind::Float, dev)),
                 )
-                .map_err(sparse_err)?;
-                out.push(empty.to_level(l, self.frame).map_err(sparse_err)?);
+                ?;
+                out.push(empty.to_level(l, self.frame)?);
                 cur = empty;
                 continue;
             }
@@ -281,10 +280,10 @@ impl OneVariant<'_> {
                 .ok_or_else(|| Error::Invalid(format!("level {l} has no upsampler")))?;
             let u = up.net.forward_t(&cur, false)?;
             let eps = gaussian(u.len(), self.seed, l, 0, dev);
-            let x = u.with_feats(noise_to(&u.feats, opts.upper_t_max, &eps)).map_err(sparse_err)?;
+            let x = u.with_feats(self.schedule.add_noise(&u.feats, opts.upper_t_max, &eps))?;
             let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps)?;
-            cur = x.prune_by_mask().map_err(sparse_err)?;
-            out.push(cur.to_level(l, self.frame).map_err(sparse_err)?);
+            cur = x.prune_by_mask()?;
+            out.push(cur.to_level(l, self.frame)?);
         }
         Ok(out)
     }
@@ -296,8 +295,8 @@ impl OneVariant<'_> {
         for (k, w) in times.windows(2).enumerate() {
             let x0_hat = net.forward_at(&x, w[0], false)?;
             let noise = gaussian(x.len(), self.seed, l, k + 1, self.models.device);
-            let next = self.sampler.step(&x.feats, &x0_hat.feats, w[0], w[1], &noise);
-            x = x.with_feats(next).map_err(sparse_err)?;
+            let next = self.sampler.step(&self.schedule, &x.feats, &x0_hat.feats, w[0], w[1], &noise);
+            x = x.with_feats(next)?;
         }
         Ok(x)
     }

@@ -1,6 +1,6 @@
 //! The diffusion process of METHOD.md section 4-5: the continuous cosine
 //! log-SNR schedule, the forward (noising) process, the time embedding, and
-//! the reverse steps as one [`Sampler`] trait with DDPM and DDIM as two impls.
+//! the reverse steps: [`Schedule`] and [`Sampler`] (DDPM or DDIM).
 //!
 //! Time is continuous, t in [0, 1]; t = 0 is clean data. The model predicts
 //! the clean grid x0 directly; samplers turn that prediction into the next
@@ -8,23 +8,57 @@
 
 use tch::Tensor;
 
-/// Offset `s` of the cosine schedule (Nichol & Dhariwal), as the code uses.
-const COSINE_S: f64 = 0.008;
-/// Clamp of the cosine schedule's argument, keeping log-SNR finite.
-const CLAMP_EPS: f64 = 1e-5;
-
-/// log SNR(t) = -log(cos((t+s)/(1+s) * pi/2)^-2 - 1), clamped.
-pub fn log_snr(t: f64) -> f64 {
-    let c = ((t + COSINE_S) / (1.0 + COSINE_S) * std::f64::consts::FRAC_PI_2).cos();
-    let inv = 1.0 / (c * c) - 1.0;
-    -(inv.max(CLAMP_EPS)).ln()
+/// The continuous cosine schedule (Nichol & Dhariwal) in log-SNR form, as the
+/// released code uses it: log SNR(t) = -log(cos((t+s)/(1+s) * pi/2)^-2 - 1),
+/// clamped so that it stays finite at both ends. Training noises with it and
+/// both samplers step with it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Schedule {
+    /// The offset s (0.008).
+    pub offset: f64,
+    /// Lower clamp of cos^-2 - 1 (1e-5: log-SNR at most ~11.5 at t = 0).
+    pub clamp: f64,
 }
 
-/// (alpha, sigma) at time t: alpha^2 = sigmoid(log_snr), sigma^2 = sigmoid(-log_snr).
-pub fn alpha_sigma(t: f64) -> (f64, f64) {
-    let l = log_snr(t);
-    let sig = |x: f64| 1.0 / (1.0 + (-x).exp());
-    (sig(l).sqrt(), sig(-l).sqrt())
+impl Default for Schedule {
+    fn default() -> Self {
+        Schedule { offset: 0.008, clamp: 1e-5 }
+    }
+}
+
+impl Schedule {
+    /// log SNR(t), decreasing in t.
+    pub fn log_snr(&self, t: f64) -> f64 {
+        let c = ((t + self.offset) / (1.0 + self.offset) * std::f64::consts::FRAC_PI_2).cos();
+        let inv = 1.0 / (c * c) - 1.0;
+        -(inv.max(self.clamp)).ln()
+    }
+
+    /// (alpha, sigma) at time t: alpha^2 = sigmoid(log_snr), sigma^2 = sigmoid(-log_snr).
+    pub fn alpha_sigma(&self, t: f64) -> (f64, f64) {
+        let l = self.log_snr(t);
+        let sig = |x: f64| 1.0 / (1.0 + (-x).exp());
+        (sig(l).sqrt(), sig(-l).sqrt())
+    }
+
+    /// Forward process: x_t = alpha(t) x0 + sigma(t) eps.
+    pub fn add_noise(&self, x0: &Tensor, t: f64, eps: &Tensor) -> Tensor {
+        let (a, s) = self.alpha_sigma(t);
+        x0 * a + eps * s
+    }
+
+    /// Forward process with a time per row (`t`: [rows] of t values), the
+    /// same formula as [`Schedule::log_snr`] in tensor form (a batch of crops,
+    /// each at its own time).
+    pub fn add_noise_rows(&self, x0: &Tensor, t: &Tensor, eps: &Tensor) -> Tensor {
+        let arg = (t + self.offset) / (1.0 + self.offset) * std::f64::consts::FRAC_PI_2;
+        let c = arg.cos();
+        let inv = (c.square().reciprocal() - 1.0).clamp_min(self.clamp);
+        let l = -inv.log();
+        let alpha = l.sigmoid().sqrt().unsqueeze(1);
+        let sigma = (-l).sigmoid().sqrt().unsqueeze(1);
+        x0 * alpha + eps * sigma
+    }
 }
 
 /// The 6-number time embedding: sin and cos of 2^k * pi * t for k = 0, 1, 2,
@@ -51,83 +85,55 @@ pub fn time_embedding_rows(t: &Tensor) -> Tensor {
     Tensor::stack(&parts, 1)
 }
 
-/// Forward process: x_t = alpha(t) x0 + sigma(t) eps.
-pub fn noise_to(x0: &Tensor, t: f64, eps: &Tensor) -> Tensor {
-    let (a, s) = alpha_sigma(t);
-    x0 * a + eps * s
+/// The reverse step from time `t` to an earlier time `s` (< t), given the
+/// model's clean-data prediction `x0_hat` (`sample.sampler` in a profile).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampler {
+    /// Ancestral DDPM in continuous time, as the code: c = -expm1(l_t - l_s);
+    /// mean = alpha_s (x_t (1 - c) / alpha_t + c x0_hat); var = sigma_s^2 c.
+    Ddpm,
+    /// Deterministic DDIM: eps_hat = (x_t - alpha_t x0_hat) / sigma_t;
+    /// x_s = alpha_s x0_hat + sigma_s eps_hat.
+    Ddim,
 }
 
-/// Forward process with a per-row time ([rows] tensor of t values).
-pub fn noise_to_rows(x0: &Tensor, t: &Tensor, eps: &Tensor) -> Tensor {
-    // Compute alpha, sigma with the same formula in tensor form.
-    let arg = (t + COSINE_S) / (1.0 + COSINE_S) * std::f64::consts::FRAC_PI_2;
-    let c = arg.cos();
-    let inv = (c.square().reciprocal() - 1.0).clamp_min(CLAMP_EPS);
-    let l = -inv.log();
-    let alpha = l.sigmoid().sqrt().unsqueeze(1);
-    let sigma = (-l).sigmoid().sqrt().unsqueeze(1);
-    x0 * alpha + eps * sigma
-}
-
-/// A reverse step from time `t` to an earlier time `s` (< t), given the
-/// model's clean-data prediction `x0_hat`.
-pub trait Sampler {
-    fn name(&self) -> &'static str;
-    /// `noise` is a fresh N(0,1) tensor like `x_t`; deterministic samplers
-    /// ignore it (it is still drawn, so a seed gives the same stream).
-    fn step(&self, x_t: &Tensor, x0_hat: &Tensor, t: f64, s: f64, noise: &Tensor) -> Tensor;
-}
-
-// Both samplers return the clean prediction itself on the last step (s = 0):
-// the clamped schedule has alpha(0) = 0.99996, not 1, and scaling the result
-// by it would shrink every feature slightly.
-
-/// Ancestral DDPM in continuous time, as the code: c = -expm1(l_t - l_s);
-/// mean = alpha_s (x_t (1 - c) / alpha_t + c x0_hat); var = sigma_s^2 c.
-pub struct Ddpm;
-
-impl Sampler for Ddpm {
-    fn name(&self) -> &'static str {
-        "ddpm"
+impl std::fmt::Display for Sampler {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Sampler::Ddpm => "ddpm",
+            Sampler::Ddim => "ddim",
+        })
     }
-    fn step(&self, x_t: &Tensor, x0_hat: &Tensor, t: f64, s: f64, noise: &Tensor) -> Tensor {
+}
+
+impl Sampler {
+    /// One reverse step. `noise` is a fresh N(0,1) tensor like `x_t`; DDIM
+    /// ignores it (it is still drawn, so a seed gives the same stream).
+    ///
+    /// Both return the clean prediction itself on the last step (s = 0): the
+    /// clamped schedule has alpha(0) = 0.99996, not 1, and scaling the result
+    /// by it would shrink every feature slightly.
+    pub fn step(&self, schedule: &Schedule, x_t: &Tensor, x0_hat: &Tensor, t: f64, s: f64, noise: &Tensor) -> Tensor {
         if s <= 0.0 {
             return x0_hat.shallow_clone();
         }
-        let (lt, ls) = (log_snr(t), log_snr(s));
-        let c = -(lt - ls).exp_m1();
-        let (at, _) = alpha_sigma(t);
-        let (as_, ss) = alpha_sigma(s);
-        let mean = (x_t * ((1.0 - c) / at) + x0_hat * c) * as_;
-        mean + noise * (ss * ss * c).sqrt()
-    }
-}
-
-/// Deterministic DDIM: eps_hat = (x_t - alpha_t x0_hat) / sigma_t;
-/// x_s = alpha_s x0_hat + sigma_s eps_hat.
-pub struct Ddim;
-
-impl Sampler for Ddim {
-    fn name(&self) -> &'static str {
-        "ddim"
-    }
-    fn step(&self, x_t: &Tensor, x0_hat: &Tensor, t: f64, s: f64, _noise: &Tensor) -> Tensor {
-        if s <= 0.0 {
-            return x0_hat.shallow_clone();
+        match self {
+            Sampler::Ddpm => {
+                let (lt, ls) = (schedule.log_snr(t), schedule.log_snr(s));
+                let c = -(lt - ls).exp_m1();
+                let (at, _) = schedule.alpha_sigma(t);
+                let (as_, ss) = schedule.alpha_sigma(s);
+                let mean = (x_t * ((1.0 - c) / at) + x0_hat * c) * as_;
+                mean + noise * (ss * ss * c).sqrt()
+            }
+            Sampler::Ddim => {
+                let (at, st) = schedule.alpha_sigma(t);
+                let (as_, ss) = schedule.alpha_sigma(s);
+                let eps_hat = (x_t - x0_hat * at) / st.max(1e-8);
+                x0_hat * as_ + eps_hat * ss
+            }
         }
-        let (at, st) = alpha_sigma(t);
-        let (as_, ss) = alpha_sigma(s);
-        let eps_hat = (x_t - x0_hat * at) / st.max(1e-8);
-        x0_hat * as_ + eps_hat * ss
-    }
-}
-
-/// The sampler named in a configuration.
-pub fn sampler(name: &str) -> Option<Box<dyn Sampler + Send + Sync>> {
-    match name {
-        "ddpm" => Some(Box::new(Ddpm)),
-        "ddim" => Some(Box::new(Ddim)),
-        _ => None,
     }
 }
 
@@ -145,15 +151,16 @@ mod tests {
 
     #[test]
     fn schedule_goes_from_clean_to_noise() {
-        let (a0, s0) = alpha_sigma(0.0);
-        let (a1, s1) = alpha_sigma(1.0);
+        let sch = Schedule::default();
+        let (a0, s0) = sch.alpha_sigma(0.0);
+        let (a1, s1) = sch.alpha_sigma(1.0);
         assert!(a0 > 0.99 && s0 < 0.1, "t=0: {a0} {s0}");
         assert!(a1 < 0.01 && s1 > 0.99, "t=1: {a1} {s1}");
         for i in 0..100 {
             let t = i as f64 / 100.0;
-            let (a, s) = alpha_sigma(t);
+            let (a, s) = sch.alpha_sigma(t);
             assert!((a * a + s * s - 1.0).abs() < 1e-9);
-            assert!(log_snr(t) > log_snr(t + 0.01), "log-SNR decreases");
+            assert!(sch.log_snr(t) > sch.log_snr(t + 0.01), "log-SNR decreases");
         }
     }
 
@@ -162,9 +169,10 @@ mod tests {
         let x0 = Tensor::ones([3, 10], (Kind::Float, tch::Device::Cpu));
         let eps = Tensor::ones([3, 10], (Kind::Float, tch::Device::Cpu)) * 0.5;
         let t = Tensor::from_slice(&[0.1f32, 0.3, 0.7]);
-        let rows = noise_to_rows(&x0, &t, &eps);
+        let sch = Schedule::default();
+        let rows = sch.add_noise_rows(&x0, &t, &eps);
         for (i, tv) in [0.1, 0.3, 0.7].iter().enumerate() {
-            let one = noise_to(&x0.get(i as i64), *tv, &eps.get(i as i64));
+            let one = sch.add_noise(&x0.get(i as i64), *tv, &eps.get(i as i64));
             let d = (rows.get(i as i64) - one).abs().max().double_value(&[]);
             assert!(d < 1e-5, "row {i}: {d}");
         }
@@ -175,15 +183,16 @@ mod tests {
         // With x0_hat = x0, both samplers land on x0 at s = 0.
         let x0 = Tensor::from_slice(&[0.3f32, -0.7, 1.5, 0.0]);
         let eps = Tensor::from_slice(&[1.0f32, -0.5, 0.2, 2.0]);
-        for sampler in [sampler("ddpm").unwrap(), sampler("ddim").unwrap()] {
+        let sch = Schedule::default();
+        for sampler in [Sampler::Ddpm, Sampler::Ddim] {
             let times = reverse_times(1.0, 20);
-            let mut x = noise_to(&x0, times[0], &eps);
+            let mut x = sch.add_noise(&x0, times[0], &eps);
             for w in times.windows(2) {
                 let noise = Tensor::zeros_like(&x);
-                x = sampler.step(&x, &x0, w[0], w[1], &noise);
+                x = sampler.step(&sch, &x, &x0, w[0], w[1], &noise);
             }
             let d = (&x - &x0).abs().max().double_value(&[]);
-            assert!(d < 1e-4, "{}: {d}", sampler.name());
+            assert!(d < 1e-4, "{sampler}: {d}");
         }
     }
 
@@ -192,9 +201,10 @@ mod tests {
         // DDIM from t to s with the true x0: x_s = alpha_s x0 + sigma_s eps.
         let x0 = Tensor::from_slice(&[0.5f32, -0.5]);
         let eps = Tensor::from_slice(&[1.0f32, 2.0]);
-        let x_t = noise_to(&x0, 0.6, &eps);
-        let x_s = Ddim.step(&x_t, &x0, 0.6, 0.3, &Tensor::zeros_like(&x0));
-        let want = noise_to(&x0, 0.3, &eps);
+        let sch = Schedule::default();
+        let x_t = sch.add_noise(&x0, 0.6, &eps);
+        let x_s = Sampler::Ddim.step(&sch, &x_t, &x0, 0.6, 0.3, &Tensor::zeros_like(&x0));
+        let want = sch.add_noise(&x0, 0.3, &eps);
         assert!((x_s - want).abs().max().double_value(&[]) < 1e-5);
     }
 

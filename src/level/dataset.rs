@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::encode::{EncodeOptions, EncodeStats, Pooling};
+use crate::encode::{EncodeOptions, EncodeStats};
 use crate::error::{write_atomically, Error, Result};
 use crate::level::Level;
 use crate::io::mesh::Mesh;
@@ -41,7 +41,7 @@ pub struct Manifest {
     pub centre: [f64; 3],
     pub scale: f64,
     pub sampling_resolution: u32,
-    pub pooling: String,
+    pub pooling: crate::encode::Pooling,
     pub levels: Vec<LevelEntry>,
     /// Wall seconds per encoding stage.
     pub seconds: std::collections::BTreeMap<String, f64>,
@@ -135,10 +135,7 @@ pub fn write(
         centre: frame.centre.to_array(),
         scale: frame.scale,
         sampling_resolution: options.sampling_resolution,
-        pooling: match options.pooling {
-            Pooling::Qem => "qem".into(),
-            Pooling::Average => "average".into(),
-        },
+        pooling: options.pooling,
         levels: entries,
         seconds,
     };

@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{Config, MeshConfig};
 use crate::level::dataset;
-use crate::encode::{self, EncodeOptions, Pooling};
+use crate::encode::{self, EncodeOptions};
 use crate::error::{write_atomically, Error, Result};
 use crate::level::Level;
 use crate::io::mesh::Mesh;
@@ -76,7 +76,7 @@ pub fn encode_options(config: &Config) -> EncodeOptions {
         sampling_resolution: config.encode.sampling_resolution,
         coarsest_resolution: config.encode.coarsest_resolution,
         finest_resolution: config.encode.finest_resolution,
-        pooling: if config.encode.pooling == "average" { Pooling::Average } else { Pooling::Qem },
+        pooling: config.encode.pooling,
         ..Default::default()
     }
 }
@@ -513,7 +513,7 @@ pub fn mesh_level(
     if let Some(resolution) = resolution {
         (poisson.resolution, apss.resolution) = (resolution, resolution);
     }
-    let m = recon::reconstruct(&points, method, &poisson, &apss).map_err(|e| Error::Invalid(e.to_string()))?;
+    let m = recon::reconstruct(&points, method, &poisson, &apss)?;
     let mesh = Mesh {
         name: "mesh".into(),
         positions: m.positions,

@@ -43,30 +43,19 @@ use glam::Vec3;
 use crate::geom::nearest::Nearest;
 use crate::io::poisson;
 use spatial::HashGrid;
-use std::str::FromStr;
 use std::time::Instant;
 
 /// Fewer points than this are refused by both methods.
 pub const MIN_POINTS: usize = 16;
 
 /// The meshing method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
 pub enum Method {
     /// Closed surfaces (CGAL's Poisson reconstruction).
     Poisson,
     /// Open surfaces (algebraic point set surfaces on a sparse grid).
     Apss,
-}
-
-impl FromStr for Method {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "poisson" => Ok(Method::Poisson),
-            "apss" => Ok(Method::Apss),
-            _ => Err(format!("unknown meshing method {s:?} (expected poisson or apss)")),
-        }
-    }
 }
 
 impl std::fmt::Display for Method {

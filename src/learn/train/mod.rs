@@ -11,10 +11,9 @@
 //!   that target); the diffusion model learns random `crop`^3 crops centred on random
 //!   active fine voxels, `upper_batch` per step, t ~ U[0, upper_t_max].
 //!
-//! The forward process is x_t = alpha(t) x_mix + sigma(t) eps with x_mix = x0 (the
-//! released code's behaviour, `mixing = "code"`) or, with `mixing = "paper"`,
-//! x_mix = gamma x0 + (1 - gamma) U_l(coarse), gamma = 1 - t / upper_t_max. The loss
-//! is the MSE between M_l(x_t, t) and x0 over all voxels and channels.
+//! The forward process is x_t = alpha(t) x0 + sigma(t) eps ([`Schedule`], the
+//! released code's; the paper's mixing of x0 with U_l(coarse) is not used). The
+//! loss is the MSE between M_l(x_t, t) and x0 over all voxels and channels.
 //!
 //! Reproducibility: every step reseeds libtorch's generator and its own crop/time
 //! generator from (seed, level, phase, step), so a run is a pure function of the
@@ -34,42 +33,25 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use glam::IVec3;
-use serde::{Deserialize, Serialize};
 use tch::{nn::OptimizerConfig, Device, Kind, Tensor};
 
 use crate::config::Config;
 use crate::util::rng::Rng;
-use crate::learn::schedule::noise_to_rows;
+use crate::learn::schedule::Schedule;
 use crate::error::{write_atomically, Error, Result};
 use crate::level::{Channel, Level};
-use crate::learn::nn::{mse, new_diffusion, new_upsampler, sparse_err, DiffusionNet, LevelNet, Upsampler};
+use crate::learn::nn::{mse, new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{flood_blur, upsample_trilinear, SparseTensor};
 
 pub mod optim;
 
-use optim::{lr_at, Ema};
+pub use crate::learn::checkpoint::{
+    diffusion_checkpoint, diffusion_ema_checkpoint, loss_plot_path, read_state, state_path, upsampler_checkpoint,
+    TrainState,
+};
+use crate::learn::seed::{derive_seed, Stream};
 
-/// Checkpoint of level `level`'s diffusion model in `dir`.
-pub fn diffusion_checkpoint(dir: &Path, level: usize) -> PathBuf {
-    dir.join(format!("level_{level}_diffusion.safetensors"))
-}
-/// The moving average of level `level`'s diffusion weights in `dir` (what
-/// sampling uses when `train.ema_decay` > 0).
-pub fn diffusion_ema_checkpoint(dir: &Path, level: usize) -> PathBuf {
-    dir.join(format!("level_{level}_diffusion_ema.safetensors"))
-}
-/// Checkpoint of level `level`'s upsampler in `dir` (levels >= 1).
-pub fn upsampler_checkpoint(dir: &Path, level: usize) -> PathBuf {
-    dir.join(format!("level_{level}_upsampler.safetensors"))
-}
-/// Training state of level `level` in `dir`.
-pub fn state_path(dir: &Path, level: usize) -> PathBuf {
-    dir.join(format!("level_{level}_state.json"))
-}
-/// Loss plot of level `level` in `dir`.
-pub fn loss_plot_path(dir: &Path, level: usize) -> PathBuf {
-    dir.join(format!("level_{level}_loss.png"))
-}
+use optim::{lr_at, Ema};
 
 /// Digest of what a level's training depends on, minus the iteration counts and the
 /// checkpoint interval: a run may be resumed with more iterations.
@@ -80,30 +62,6 @@ pub fn resume_digest(config: &Config) -> String {
     c.train.upsampler_iterations = 0;
     c.train.checkpoint_minutes = 0.0;
     c.stage_digest("train")
-}
-
-/// What `level_K_state.json` holds.
-#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
-pub struct TrainState {
-    pub level: usize,
-    /// [`resume_digest`] of the configuration that trained it.
-    pub config_digest: String,
-    /// Full digest of that configuration (for the record).
-    pub full_config_digest: String,
-    pub upsampler_steps: usize,
-    pub diffusion_steps: usize,
-    /// Loss of every step, in order.
-    pub upsampler_loss: Vec<f32>,
-    pub diffusion_loss: Vec<f32>,
-    /// Training time so far (all sessions), seconds.
-    pub seconds: f64,
-    pub finished: bool,
-    pub note: String,
-}
-
-/// The training state recorded for `level` in `dir`, if one is there and reads.
-pub fn read_state(dir: &Path, level: usize) -> Option<TrainState> {
-    serde_json::from_str(&std::fs::read_to_string(state_path(dir, level)).ok()?).ok()
 }
 
 /// The outcome of [`train_level`].
@@ -212,7 +170,7 @@ pub fn train_level_with(
     let seconds_before = state.seconds;
 
     // ------------------------------------------------------------ models
-    tch::manual_seed(mix_seed(tc.seed, level as u64, 0, u64::MAX) as i64);
+    tch::manual_seed(derive_seed(tc.seed, level as u64, Stream::Init, u64::MAX) as i64);
     let mut diffusion = new_diffusion(&config.model, level, device)?;
     let mut upsampler = if level > 0 { Some(new_upsampler(&config.model, device)?) } else { None };
     if state.diffusion_steps > 0 {
@@ -253,11 +211,11 @@ pub fn train_level_with(
 
     if level == 0 {
         // -------------------------------------------------------- level 0
-        let gt = SparseTensor::from_level(&levels[0], device).map_err(sparse_err)?;
-        let target = flood_blur(&gt).map_err(sparse_err)?;
+        let gt = SparseTensor::from_level(&levels[0], device)?;
+        let target = flood_blur(&gt)?;
         grid_voxels = target.len();
         let copies: Vec<&SparseTensor> = (0..tc.level0_batch).map(|_| &target).collect();
-        let x0 = SparseTensor::batch(&copies).map_err(sparse_err)?;
+        let x0 = SparseTensor::batch(&copies)?;
         let n = target.len();
         let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
         let net = &diffusion.net;
@@ -265,13 +223,13 @@ pub fn train_level_with(
         let base = state.clone();
         let d_ref = &diffusion;
         let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
-            let mut rng = Rng::new(mix_seed(tc.seed, 0, 2, step as u64));
+            let mut rng = Rng::new(derive_seed(tc.seed, 0, Stream::DiffusionStep, step as u64));
             tch::manual_seed(rng.next_u64() as i64);
             let t_items: Vec<f32> = (0..tc.level0_batch).map(|_| rng.uniform() as f32).collect();
             let t_rows: Vec<f32> = t_items.iter().flat_map(|&t| std::iter::repeat(t).take(n)).collect();
             let t_rows = Tensor::from_slice(&t_rows).to_device(device);
             opt.set_lr(lr(step, diff_total, tc.lr));
-            let loss = diffusion_step(net, &mut opt, &x0, None, &t_rows, 1.0, tc.grad_clip)?;
+            let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip)?;
             if let Some(e) = ema.borrow_mut().as_mut() {
                 e.update();
             }
@@ -282,8 +240,8 @@ pub fn train_level_with(
         interrupted |= r.2;
     } else {
         // -------------------------------------------------------- levels >= 1
-        let coarse = SparseTensor::from_level(&levels[level - 1], device).map_err(sparse_err)?;
-        let fine = SparseTensor::from_level(&levels[level], device).map_err(sparse_err)?;
+        let coarse = SparseTensor::from_level(&levels[level - 1], device)?;
+        let fine = SparseTensor::from_level(&levels[level], device)?;
         let target = flooded_target(&coarse, &fine)?;
         grid_voxels = target.len();
         let centres: Vec<IVec3> = levels[level]
@@ -305,7 +263,7 @@ pub fn train_level_with(
             let target_f = target.feats.shallow_clone();
             let base = state.clone();
             let r = phase.run(&mut state.upsampler_steps, &mut state.upsampler_loss, &stop, |step| {
-                tch::manual_seed(mix_seed(tc.seed, level as u64, 1, step as u64) as i64);
+                tch::manual_seed(derive_seed(tc.seed, level as u64, Stream::UpsamplerStep, step as u64) as i64);
                 opt.set_lr(lr(step, tc.upsampler_iterations, tc.upsampler_lr));
                 let pred = net.forward_t(&coarse, true)?;
                 let loss = mse(&pred.feats, &target_f);
@@ -325,41 +283,27 @@ pub fn train_level_with(
         }
         // diffusion: random crops
         if !interrupted {
-            let x_blur = if tc.mixing == "paper" {
-                Some(tch::no_grad(|| u_ref.net.forward_t(&coarse, false))?.map(|f| f.detach()))
-            } else {
-                None
-            };
             let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
             let net = &diffusion.net;
             let phase = Phase { name: "diffusion", total: diff_total, progress };
             let base = state.clone();
             let d_ref = &diffusion;
             let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
-                let mut rng = Rng::new(mix_seed(tc.seed, level as u64, 2, step as u64));
+                let mut rng = Rng::new(derive_seed(tc.seed, level as u64, Stream::DiffusionStep, step as u64));
                 tch::manual_seed(rng.next_u64() as i64);
                 let mut crops = Vec::with_capacity(tc.upper_batch);
-                let mut blurs = Vec::new();
                 let mut t_rows = Vec::new();
                 for _ in 0..tc.upper_batch {
                     let c = centres[rng.below(centres.len())];
                     let t = (rng.uniform() * tc.upper_t_max) as f32;
-                    let crop = target.crop(c, 0, tc.crop).map_err(sparse_err)?;
+                    let crop = target.crop(c, 0, tc.crop)?;
                     t_rows.extend(std::iter::repeat(t).take(crop.len()));
-                    if let Some(b) = &x_blur {
-                        blurs.push(b.crop(c, 0, tc.crop).map_err(sparse_err)?);
-                    }
                     crops.push(crop);
                 }
-                let x0 = SparseTensor::batch(&crops.iter().collect::<Vec<_>>()).map_err(sparse_err)?;
-                let blur = if blurs.is_empty() {
-                    None
-                } else {
-                    Some(Tensor::cat(&blurs.iter().map(|b| &b.feats).collect::<Vec<_>>(), 0))
-                };
+                let x0 = SparseTensor::batch(&crops.iter().collect::<Vec<_>>())?;
                 let t_rows = Tensor::from_slice(&t_rows).to_device(device);
                 opt.set_lr(lr(step, diff_total, tc.lr));
-                let loss = diffusion_step(net, &mut opt, &x0, blur.as_ref(), &t_rows, tc.upper_t_max, tc.grad_clip)?;
+                let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip)?;
                 if let Some(e) = ema.borrow_mut().as_mut() {
                     e.update();
                 }
@@ -406,7 +350,7 @@ pub fn train_level_with(
 /// features with mask +1; every other child keeps X_up's features with mask -1.
 pub fn flooded_target(coarse: &SparseTensor, fine: &SparseTensor) -> Result<SparseTensor> {
     tch::no_grad(|| {
-        let x_up = upsample_trilinear(coarse).map_err(sparse_err)?;
+        let x_up = upsample_trilinear(coarse)?;
         let feats = x_up.feats.detach().copy();
         let _ = feats.narrow(1, Channel::Mask.start() as i64, 1).fill_(-1.0);
         let rows = x_up.grid.lookup(&fine.grid);
@@ -430,7 +374,7 @@ pub fn flooded_target(coarse: &SparseTensor, fine: &SparseTensor) -> Result<Spar
         let true_feats = fine.feats.index_select(0, &Tensor::from_slice(&src).to_device(dev)).copy();
         let _ = true_feats.narrow(1, Channel::Mask.start() as i64, 1).fill_(1.0);
         let feats = feats.index_copy(0, &Tensor::from_slice(&dst).to_device(dev), &true_feats);
-        x_up.with_feats(feats).map_err(sparse_err)
+        x_up.with_feats(feats).map_err(Error::from)
     })
 }
 
@@ -439,20 +383,11 @@ fn diffusion_step(
     net: &DiffusionNet,
     opt: &mut tch::nn::Optimizer,
     x0: &SparseTensor,
-    x_blur: Option<&Tensor>,
     t_rows: &Tensor,
-    t_max: f64,
     clip: f64,
 ) -> Result<f64> {
     let eps = x0.feats.randn_like();
-    let x_mix = match x_blur {
-        Some(b) => {
-            let gamma = (t_rows * (-1.0 / t_max) + 1.0).clamp(0.0, 1.0).unsqueeze(1);
-            &x0.feats * &gamma + b * (1.0 - &gamma)
-        }
-        None => x0.feats.shallow_clone(),
-    };
-    let x_t = x0.with_feats(noise_to_rows(&x_mix, t_rows, &eps)).map_err(sparse_err)?;
+    let x_t = x0.with_feats(Schedule::default().add_noise_rows(&x0.feats, t_rows, &eps))?;
     let pred = net.forward_t(&x_t, t_rows, true)?;
     let loss = mse(&pred.feats, &x0.feats);
     opt.zero_grad();
@@ -654,16 +589,6 @@ fn draw_line(img: &mut image::RgbImage, a: (i64, i64), b: (i64, i64), c: [u8; 3]
             }
         }
     }
-}
-
-/// SplitMix64 of a tuple: the per-step seeds.
-pub(crate) fn mix_seed(seed: u64, level: u64, phase: u64, step: u64) -> u64 {
-    let mut r = Rng::new(seed ^ 0x5348_4150_4553_4846);
-    let mut h = r.next_u64();
-    for v in [level, phase, step] {
-        h = Rng::new(h ^ v.wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64();
-    }
-    h >> 1 // non-negative as i64
 }
 
 #[cfg(test)]
