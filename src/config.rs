@@ -4,7 +4,6 @@
 //! finished stages reused.
 
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
 use crate::error::{Error, Result};
 
@@ -317,8 +316,7 @@ fn one() -> f64 {
 }
 
 fn digest_str(s: &str) -> String {
-    let d = Sha256::digest(s.as_bytes());
-    d.iter().take(8).map(|b| format!("{b:02x}")).collect()
+    crate::util::digest::short(s)
 }
 
 fn one_line(e: &impl std::fmt::Display) -> String {

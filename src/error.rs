@@ -60,68 +60,6 @@ pub fn one_line(message: &str) -> String {
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
-/// Checks that `path` names an existing, readable regular file.
-pub fn check_input_file(path: &Path) -> Result<()> {
-    match std::fs::metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            Err(Error::file(path, "no such file"))
-        }
-        Err(e) => Err(Error::file(path, e.to_string())),
-        Ok(m) if m.is_dir() => Err(Error::file(path, "is a directory, expected a file")),
-        Ok(m) if m.len() == 0 => Err(Error::file(path, "is empty")),
-        Ok(_) => Ok(()),
-    }
-}
-
-/// Writes a file atomically: `write` fills a temporary path in the same
-/// folder, which is renamed onto `path` only when it succeeded. On failure
-/// the temporary file is removed, so no half-written output is ever left.
-/// A short hash of this machine's host name (0 when unknown).
-fn host_hash() -> u32 {
-    let name = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
-    name.trim().bytes().fold(2166136261u32, |h, b| (h ^ b as u32).wrapping_mul(16777619))
-}
-
-pub fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<()>,
-) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    if !dir.is_dir() {
-        return Err(Error::file(path, format!("folder {} does not exist", dir.display())));
-    }
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::file(path, "is not a file name"))?
-        .to_string_lossy();
-    // Keep the extension last: OpenMesh and image pick the format from it.
-    // Unique across processes on several hosts writing one shared folder (a
-    // cluster's array tasks) and across threads: pid, host, time and a counter.
-    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let unique = format!(
-        "{}-{:x}-{:x}-{}",
-        std::process::id(),
-        host_hash(),
-        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64),
-        COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-    );
-    let tmp = dir.join(format!(".{}.{}.tmp.{}", name, unique, extension_of(path)));
-    let result = write(&tmp).and_then(|_| {
-        std::fs::rename(&tmp, path).map_err(|e| Error::file(path, e.to_string()))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
-fn extension_of(path: &Path) -> String {
-    path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default()
-}
-
 #[cfg(test)]
 mod tests {
     #[test]

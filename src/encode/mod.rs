@@ -1101,18 +1101,11 @@ mod tests {
     use super::*;
     use std::collections::HashSet;
 
-    /// Deterministic xorshift generator in [0, 1).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn vec(&mut self) -> DVec3 {
-            DVec3::new(self.next(), self.next(), self.next()) * 2.0 - DVec3::ONE
-        }
+    use crate::util::rng::Rng;
+
+    /// A random point of [-1, 1]^3.
+    fn random_point(rng: &mut Rng) -> DVec3 {
+        DVec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - DVec3::ONE
     }
 
     fn mesh(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Mesh {
@@ -1219,9 +1212,9 @@ mod tests {
 
     #[test]
     fn morton_round_trip_and_parent() {
-        let mut rng = Rng(7);
+        let mut rng = Rng::new(7);
         for _ in 0..1000 {
-            let c = [0; 3].map(|_: i32| (rng.next() * (1 << 21) as f64) as u32);
+            let c = [0; 3].map(|_: i32| (rng.uniform() * (1 << 21) as f64) as u32);
             let key = morton(c[0], c[1], c[2]);
             assert_eq!(morton_decode(key), IVec3::new(c[0] as i32, c[1] as i32, c[2] as i32));
             assert_eq!(key >> 3, morton(c[0] / 2, c[1] / 2, c[2] / 2));
@@ -1237,10 +1230,10 @@ mod tests {
 
     #[test]
     fn closest_point_matches_dense_search() {
-        let mut rng = Rng(11);
+        let mut rng = Rng::new(11);
         for _ in 0..200 {
-            let t = [rng.vec(), rng.vec(), rng.vec()];
-            let p = rng.vec() * 1.5;
+            let t = [random_point(&mut rng), random_point(&mut rng), random_point(&mut rng)];
+            let p = random_point(&mut rng) * 1.5;
             let (w, _) = closest_on_triangle(p, &t);
             assert!((w.element_sum() - 1.0).abs() < 1e-12 && w.min_element() >= -1e-12);
             let d = (w.x * t[0] + w.y * t[1] + w.z * t[2]).distance(p);
@@ -1258,9 +1251,9 @@ mod tests {
 
     #[test]
     fn symmetric_eigen_reconstructs() {
-        let mut rng = Rng(3);
+        let mut rng = Rng::new(3);
         for _ in 0..200 {
-            let (x, y) = (rng.vec(), rng.vec());
+            let (x, y) = (random_point(&mut rng), random_point(&mut rng));
             let a = [[x.x, y.x, y.y], [y.x, x.y, y.z], [y.y, y.z, x.z]];
             let (l, v) = symmetric_eigen(a);
             for i in 0..3 {
@@ -1295,10 +1288,10 @@ mod tests {
     /// within half a voxel diagonal of the triangle.
     #[test]
     fn voxelisation_is_exact() {
-        let mut rng = Rng(5);
+        let mut rng = Rng::new(5);
         let r = 16u32;
         for _ in 0..100 {
-            let g = [0; 3].map(|_: i32| (rng.vec() * 0.45 + DVec3::splat(0.5)) * r as f64);
+            let g = [0; 3].map(|_: i32| (random_point(&mut rng) * 0.45 + DVec3::splat(0.5)) * r as f64);
             let n = (g[1] - g[0]).cross(g[2] - g[0]).normalize();
             let mut found = HashSet::new();
             voxelise_triangle(&g, n, r, |i, j, k| assert!(found.insert((i, j, k)), "duplicate"));

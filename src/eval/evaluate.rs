@@ -119,7 +119,7 @@ impl Evaluation {
     /// Writes the evaluation as pretty JSON, atomically.
     pub fn write_json(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self).map_err(|e| Error::file(path, e.to_string()))?;
-        crate::error::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(path, e.to_string())))
+        crate::util::fs::write_file(path, &text)
     }
 
     /// The lattice in one line, then the report's table.

@@ -62,7 +62,7 @@ pub fn inspect(path: &Path) -> Result<FileInfo> {
         let m = mesh::load(path)?;
         Ok(FileInfo::Mesh(MeshInfo { path: path.display().to_string(), summary: m.summary() }))
     } else {
-        crate::error::check_input_file(path)?;
+        crate::util::fs::check_input_file(path)?;
         Err(Error::file(path, format!("unknown file type '.{ext}' (expected .vdb or a mesh)")))
     }
 }

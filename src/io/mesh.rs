@@ -7,7 +7,8 @@ use std::path::Path;
 
 use glam::{Vec2, Vec3};
 
-use crate::error::{check_input_file, write_atomically, Error, Result};
+use crate::error::{Error, Result};
+use crate::util::fs::{check_input_file, write_atomically, write_file};
 use crate::io::ffi::bridge;
 
 /// Where a mesh's colour comes from.
@@ -348,7 +349,7 @@ pub fn save(mesh: &Mesh, path: &Path, binary: bool) -> Result<()> {
     }
     if ext == "glb" {
         let bytes = crate::io::glb::to_bytes(mesh).map_err(|e| Error::file(path, e.to_string()))?;
-        return write_atomically(path, |tmp| std::fs::write(tmp, &bytes).map_err(|e| Error::file(path, e.to_string())));
+        return write_file(path, &bytes);
     }
     let vertex_colours: Vec<f32> = match mesh.vertex_colours() {
         Some(c) if ext == "ply" => c.iter().flat_map(|c| c.to_array()).collect(),
@@ -474,5 +475,5 @@ pub fn save_points_ply(path: &Path, positions: &[Vec3], normals: &[Vec3], colour
             bytes.push((v.clamp(0.0, 1.0) * 255.0).round() as u8);
         }
     }
-    write_atomically(path, |tmp| std::fs::write(tmp, &bytes).map_err(|e| Error::file(path, e.to_string())))
+    write_file(path, &bytes)
 }

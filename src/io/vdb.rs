@@ -16,7 +16,8 @@ use std::path::Path;
 use glam::{DVec3, IVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{check_input_file, write_atomically, Error, Result};
+use crate::error::{Error, Result};
+use crate::util::fs::{check_input_file, write_atomically};
 use crate::io::ffi::bridge::{self, GridSummary, LevelData, MetaEntry, MetaKind};
 use crate::level::{Frame, Level};
 

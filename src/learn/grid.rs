@@ -731,21 +731,11 @@ mod tests {
     use super::*;
     use std::collections::{HashMap, HashSet};
 
-    /// Small deterministic pseudo-random generator for tests.
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> u64 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            self.0 >> 33
-        }
-        fn below(&mut self, n: i32) -> i32 {
-            (self.next() % n as u64) as i32
-        }
-    }
+    use crate::util::rng::Rng;
 
-    fn random_coords(rng: &mut Lcg, n: usize, lo: i32, size: i32) -> Vec<IVec3> {
+    fn random_coords(rng: &mut Rng, n: usize, lo: i32, size: i32) -> Vec<IVec3> {
         (0..n)
-            .map(|_| IVec3::new(lo + rng.below(size), lo + rng.below(size), lo + rng.below(size)))
+            .map(|_| IVec3::new(lo + rng.below(size as usize) as i32, lo + rng.below(size as usize) as i32, lo + rng.below(size as usize) as i32))
             .collect()
     }
 
@@ -797,7 +787,7 @@ mod tests {
 
     #[test]
     fn kernel_maps_match_brute_force() {
-        let mut rng = Lcg(7);
+        let mut rng = Rng::new(7);
         // Dense-ish and sparse sets, negative coordinates, more rows than one block.
         for (n, lo, size) in [(300, -4, 8), (6000, -10, 20), (5000, 0, 60)] {
             let g = SparseGrid::from_coords(32, &random_coords(&mut rng, n, lo, size)).unwrap();
@@ -872,7 +862,7 @@ mod tests {
         assert_eq!(two.dilate(1).unwrap().len(), 2 * 27 - 9);
         assert_eq!(two.dilate(2).unwrap().len(), 7 * 25);
         // dilation equals the union of neighbourhoods (brute force)
-        let mut rng = Lcg(3);
+        let mut rng = Rng::new(3);
         let r = SparseGrid::from_coords(16, &random_coords(&mut rng, 50, 0, 10)).unwrap();
         let mut want = HashSet::new();
         for c in r.coords() {

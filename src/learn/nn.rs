@@ -170,7 +170,7 @@ impl<N> LevelNet<N> {
 
     /// Saves as safetensors, atomically (temporary file in the same folder, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        crate::error::write_atomically(path, |tmp| {
+        crate::util::fs::write_atomically(path, |tmp| {
             self.vs.save(tmp).map_err(|e| Error::file(path, format!("cannot save checkpoint: {e}")))
         })
     }

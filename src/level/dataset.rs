@@ -6,10 +6,10 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
 use crate::encode::{EncodeOptions, EncodeStats};
-use crate::error::{write_atomically, Error, Result};
+use crate::error::{Error, Result};
+use crate::util::fs::write_file;
 use crate::level::Level;
 use crate::io::mesh::Mesh;
 use crate::render::{self, RenderOptions};
@@ -50,35 +50,20 @@ pub struct Manifest {
 /// SHA-256 (hex) of a file's bytes.
 pub fn file_sha256(path: &Path) -> Result<String> {
     let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-    Ok(hex(&Sha256::digest(&bytes)))
+    Ok(crate::util::digest::sha256(&bytes))
 }
 
 /// SHA-256 (hex) of a mesh's geometry and colours, for generated meshes.
 pub fn mesh_sha256(mesh: &Mesh) -> String {
-    let mut h = Sha256::new();
-    for p in &mesh.positions {
-        for v in p.to_array() {
-            h.update(v.to_le_bytes());
-        }
-    }
-    for t in &mesh.triangles {
-        for v in t {
-            h.update(v.to_le_bytes());
-        }
-    }
+    let mut bytes = Vec::with_capacity(12 * mesh.positions.len() * 2 + 12 * mesh.triangles.len());
+    bytes.extend(mesh.positions.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes));
+    bytes.extend(mesh.triangles.iter().flatten().flat_map(|v| v.to_le_bytes()));
     if let crate::io::mesh::MeshColours::PerVertex(c) = &mesh.colours {
-        for p in c {
-            for v in p.to_array() {
-                h.update(v.to_le_bytes());
-            }
-        }
+        bytes.extend(c.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes));
     }
-    hex(&h.finalize())
+    crate::util::digest::sha256(&bytes)
 }
 
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
 
 pub fn level_file_name(index: usize) -> String {
     format!("level_{index}.vdb")
@@ -141,7 +126,7 @@ pub fn write(
     };
     let path = dir.join(MANIFEST);
     let text = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
-    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))?;
+    write_file(&path, &text)?;
     Ok(manifest)
 }
 

@@ -182,11 +182,11 @@ pub fn write_graph(dir: &Path, jobs: &[Job]) -> Result<PathBuf> {
     std::fs::create_dir_all(dir.join("logs")).map_err(|e| Error::file(dir, e.to_string()))?;
     for j in jobs {
         let p = dir.join(&j.file);
-        crate::error::write_atomically(&p, |tmp| std::fs::write(tmp, &j.script).map_err(|e| Error::file(&p, e.to_string())))?;
+        crate::util::fs::write_file(&p, &j.script)?;
     }
     let submit = dir.join("submit.sh");
     let text = submit_script(jobs);
-    crate::error::write_atomically(&submit, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&submit, e.to_string())))?;
+    crate::util::fs::write_file(&submit, &text)?;
     use std::os::unix::fs::PermissionsExt;
     std::fs::set_permissions(&submit, std::fs::Permissions::from_mode(0o755)).map_err(|e| Error::file(&submit, e.to_string()))?;
     Ok(submit)

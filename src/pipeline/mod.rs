@@ -26,7 +26,8 @@ use serde::{Deserialize, Serialize};
 use crate::config::{Config, MeshConfig};
 use crate::level::dataset;
 use crate::encode::{self, EncodeOptions};
-use crate::error::{write_atomically, Error, Result};
+use crate::error::{Error, Result};
+use crate::util::fs::write_file;
 use crate::level::Level;
 use crate::io::mesh::Mesh;
 use crate::render::{self, RenderOptions};
@@ -58,17 +59,11 @@ fn read_stamp(dir: &Path, stage: &str) -> Option<Stamp> {
 fn mark_done(dir: &Path, stage: &str, digest: &str, seconds: f64) -> Result<()> {
     let path = stamp_path(dir, stage);
     let text = serde_json::to_string(&Stamp { digest: digest.into(), seconds }).expect("stamp serialises");
-    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))
+    write_file(&path, &text)
 }
 
 fn digest(parts: &[&str]) -> String {
-    use sha2::{Digest, Sha256};
-    let mut h = Sha256::new();
-    for p in parts {
-        h.update(p.as_bytes());
-        h.update([0u8]);
-    }
-    h.finalize().iter().take(8).map(|b| format!("{b:02x}")).collect()
+    crate::util::digest::short_of_parts(parts)
 }
 
 pub fn encode_options(config: &Config) -> EncodeOptions {
@@ -478,7 +473,7 @@ pub fn record_config(dir: &Path, config: &Config) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     let path = dir.join("config.toml");
     let text = config.to_toml();
-    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))
+    write_file(&path, &text)
 }
 
 /// The surface voxels (mask > 0) of a level as oriented coloured points in
@@ -707,7 +702,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
     let outcome = LadderOutcome { options, evaluation, checks, skipped };
     let path = out.join("ladder.json");
     let text = serde_json::to_string_pretty(&outcome).map_err(|e| Error::file(&path, e.to_string()))?;
-    write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(&path, e.to_string())))?;
+    write_file(&path, &text)?;
     Ok(outcome)
 }
 
@@ -908,5 +903,5 @@ pub fn write_report(paths: &RunPaths, n: usize, evaluation: Option<&crate::eval:
     };
     let page = render::report::html(&inputs);
     let path = paths.report();
-    write_atomically(&path, |tmp| std::fs::write(tmp, &page).map_err(|e| Error::file(&path, e.to_string())))
+    write_file(&path, &page)
 }

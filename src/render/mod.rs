@@ -119,8 +119,6 @@ pub enum RenderError {
     BadSize { width: u32, height: u32 },
     #[error("bad render input: {0}")]
     Invalid(String),
-    #[error("cannot write {}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
     #[error("cannot encode {} as PNG: {source}", path.display())]
     Encode { path: PathBuf, source: image::ImageError },
 }
@@ -322,27 +320,13 @@ pub fn screen_fraction(p: Vec3, opts: &RenderOptions) -> Vec2 {
     Vec2::new(x / opts.width.max(1) as f32, y / opts.height.max(1) as f32)
 }
 
-/// Writes `img` as a PNG without ever leaving a half-written file at `path`:
-/// the image goes to `.<name>.<pid>.tmp.png` in the same folder (so the
-/// rename stays on one file system) and is renamed over `path`; on failure the
-/// temporary file is removed.
-pub fn save_png(img: &RgbImage, path: &Path) -> Result<()> {
-    let io = |source| RenderError::Io { path: path.to_path_buf(), source };
-    let name = path
-        .file_name()
-        .ok_or_else(|| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name")))?;
-    let tmp = path.with_file_name(format!(".{}.{}.tmp.png", name.to_string_lossy(), std::process::id()));
-    let written = img
-        .save_with_format(&tmp, image::ImageFormat::Png)
-        .map_err(|e| match e {
-            image::ImageError::IoError(source) => io(source),
-            source => RenderError::Encode { path: path.to_path_buf(), source },
-        })
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(io));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written
+/// Writes `img` as a PNG at `path`, atomically ([`crate::util::fs::write_file`]):
+/// encoded in memory first, so an encoding failure writes nothing.
+pub fn save_png(img: &RgbImage, path: &Path) -> crate::Result<()> {
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::Png)
+        .map_err(|source| RenderError::Encode { path: path.to_path_buf(), source })?;
+    crate::util::fs::write_file(path, bytes.into_inner())
 }
 
 fn check_size(opts: &RenderOptions) -> Result<()> {
@@ -954,7 +938,7 @@ mod tests {
         let occupied = dir.join("occupied.png");
         std::fs::create_dir_all(occupied.join("inside")).unwrap();
         let err = save_png(&img, &occupied).unwrap_err();
-        assert!(matches!(err, RenderError::Io { .. }), "{err}");
+        assert!(err.to_string().contains("occupied.png"), "{err}");
         let mut names: Vec<String> = std::fs::read_dir(&dir)
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

@@ -2,4 +2,6 @@
 //! generator, short hex digests, the allocator set-up.
 
 pub mod alloc;
+pub mod digest;
+pub mod fs;
 pub mod rng;

@@ -38,7 +38,8 @@ use tch::{nn::OptimizerConfig, Device, Kind, Tensor};
 use crate::config::Config;
 use crate::util::rng::Rng;
 use crate::learn::schedule::Schedule;
-use crate::error::{write_atomically, Error, Result};
+use crate::error::{Error, Result};
+use crate::util::fs::{write_atomically, write_file};
 use crate::level::{Channel, Level};
 use crate::learn::nn::{mse, new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{flood_blur, upsample_trilinear, SparseTensor};
@@ -518,7 +519,7 @@ impl Checkpointer {
         st.seconds = self.seconds_before + self.session_start.elapsed().as_secs_f64();
         let path = state_path(&self.out_dir, self.level);
         let text = serde_json::to_string(&st).map_err(|e| Error::file(&path, e.to_string()))?;
-        write_atomically(&path, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::file(tmp, e.to_string())))?;
+        write_file(&path, &text)?;
         self.last = Instant::now();
         Ok(())
     }

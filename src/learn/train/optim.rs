@@ -70,7 +70,7 @@ impl Ema {
     /// into a fresh network like any checkpoint.
     pub fn save(&self, path: &Path) -> Result<()> {
         let named: Vec<(&str, &Tensor)> = self.pairs.iter().map(|(n, _, a)| (n.as_str(), a)).collect();
-        crate::error::write_atomically(path, |tmp| {
+        crate::util::fs::write_atomically(path, |tmp| {
             Tensor::write_safetensors(&named, tmp).map_err(|e| Error::file(path, format!("cannot save EMA weights: {e}")))
         })
     }
