@@ -49,7 +49,7 @@ fn main() -> anyhow::Result<()> {
     let path = args.get(1).ok_or_else(|| anyhow::anyhow!("usage: mesh_fidelity MESH [method] [finest] [sampling]"))?;
     let method: Option<recon::Method> = match args.get(2).map(String::as_str) {
         None | Some("auto") => None,
-        Some(m) => Some(m.parse().map_err(|e: String| anyhow::anyhow!(e))?),
+        Some(m) => Some(<shapeshifter::recon::Method as clap::ValueEnum>::from_str(m, true).map_err(|e| anyhow::anyhow!(e))?),
     };
     let finest: u32 = args.get(3).map_or(Ok(256), |s| s.parse())?;
     let sampling: u32 = args.get(4).map_or(Ok(1024), |s| s.parse())?;

@@ -1,22 +1,16 @@
-//! Encoding real meshes from the workplace's shared test data. Each test skips
-//! with a message when the data folder is absent (a user's fresh checkout).
+//! Encoding real meshes from the workplace's shared test data. Each test is
+//! recorded as skipped when the data folder is absent (a user's fresh
+//! checkout; `common::skip`).
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
 
 use shapeshifter::encode::{encode, normalisation_frame, EncodeOptions, Pooling};
 use shapeshifter::level::Level;
 use shapeshifter::io::mesh::{self, Mesh};
 use glam::{DVec3, Vec3};
 
-/// `../shared/data/<rel>` from the project root, if present.
-fn shared_data(rel: &str) -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    [root.join("../shared/data"), root.join("../../shared/data")]
-        .into_iter()
-        .map(|d| d.join(rel))
-        .find(|p| p.is_file())
-}
+mod common;
+use common::shared_data;
 
 fn sharp_corners(mesh: &Mesh) -> Vec<usize> {
     let p = |v: u32| mesh.positions[v as usize].as_dvec3();
@@ -56,7 +50,6 @@ fn corner_errors(mesh: &Mesh, level: &Level, corners: &[usize]) -> Vec<f64> {
 #[test]
 fn fandisk_corners_stay_sharp_with_qem() {
     let Some(path) = shared_data("cgal/fandisk.off") else {
-        eprintln!("skipped: ../shared/data/cgal/fandisk.off is absent");
         return;
     };
     let mesh = mesh::load(&path).expect("fandisk loads");
@@ -99,7 +92,6 @@ fn fandisk_corners_stay_sharp_with_qem() {
 #[test]
 fn airplane_vertex_colours_land_on_the_points() {
     let Some(path) = shared_data("pymeshlab/colored_airplane.ply") else {
-        eprintln!("skipping: ../shared/data/pymeshlab/colored_airplane.ply is absent");
         return;
     };
     let mesh = mesh::load(&path).expect("airplane loads");
@@ -124,7 +116,6 @@ fn airplane_vertex_colours_land_on_the_points() {
 #[test]
 fn three_peaks_stays_open() {
     let Some(path) = shared_data("cgal/three_peaks.off") else {
-        eprintln!("skipping: ../shared/data/cgal/three_peaks.off is absent");
         return;
     };
     let mesh = mesh::load(&path).expect("three_peaks loads");

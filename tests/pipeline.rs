@@ -195,7 +195,7 @@ fn sampling_is_reproducible_and_follows_options() {
     assert!(!same(&a, &c), "different seed, same output");
     assert!(!same(&a[0..1], &a[1..2]), "variants are identical");
     // ddpm works too
-    let d = sample(&models, &levels, &SampleOptions { sampler: "ddpm".into(), ..opts.clone() }, None).unwrap();
+    let d = sample(&models, &levels, &SampleOptions { sampler: shapeshifter::learn::schedule::Sampler::Ddpm, ..opts.clone() }, None).unwrap();
     assert_eq!(d[0].len(), 2);
 
     // fine levels only contain children of the coarse level

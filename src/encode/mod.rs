@@ -34,7 +34,7 @@ pub mod exemplar;
 
 use std::time::Instant;
 
-use glam::{DVec3, IVec3, Vec2, Vec3};
+use glam::{DVec3, IVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::level::{Frame, Level};
@@ -775,33 +775,11 @@ impl<'a> ColourSource<'a> {
             ColourSource::PerCorner(c) => w.x * c[3 * t] + w.y * c[3 * t + 1] + w.z * c[3 * t + 2],
             ColourSource::Texture(tex) => {
                 let uv = w.x * tex.uvs[3 * t] + w.y * tex.uvs[3 * t + 1] + w.z * tex.uvs[3 * t + 2];
-                sample_texture(&tex.image, uv)
+                crate::geom::texture::sample_bilinear(&tex.image, uv).unwrap_or(Vec3::ZERO)
             }
         };
         c.clamp(Vec3::ZERO, Vec3::ONE)
     }
-}
-
-/// Bilinear texture lookup with wrap-around. OBJ convention: v = 0 is the bottom
-/// row of the image, (u, v) = (0, 1) the top-left corner; texel centres sit at
-/// half-integer pixel coordinates.
-fn sample_texture(image: &image::RgbImage, uv: Vec2) -> Vec3 {
-    if !uv.is_finite() {
-        return Vec3::ZERO;
-    }
-    let (w, h) = (image.width() as i64, image.height() as i64);
-    let x = uv.x as f64 * w as f64 - 0.5;
-    let y = (1.0 - uv.y as f64) * h as f64 - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-    let texel = |xi: i64, yi: i64| {
-        let p = image.get_pixel(xi.rem_euclid(w) as u32, yi.rem_euclid(h) as u32).0;
-        Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) / 255.0
-    };
-    let (x0, y0) = (x0 as i64, y0 as i64);
-    let top = texel(x0, y0).lerp(texel(x0 + 1, y0), fx);
-    let bottom = texel(x0, y0 + 1).lerp(texel(x0 + 1, y0 + 1), fx);
-    top.lerp(bottom, fy)
 }
 
 /// Closest point, normal and colour for every voxel group of the sorted `pairs`.
@@ -1518,7 +1496,7 @@ mod tests {
             .iter()
             .map(|&(x, y)| Vec3::new(x, y, z(x, y)))
             .collect();
-        let uv_of = |p: Vec3| Vec2::new(0.1 + 0.4 * (p.x + 1.0), 0.15 + 0.35 * (p.y + 1.0));
+        let uv_of = |p: Vec3| glam::Vec2::new(0.1 + 0.4 * (p.x + 1.0), 0.15 + 0.35 * (p.y + 1.0));
         let triangles = vec![[0, 1, 2], [0, 2, 3]];
         let uvs = triangles.iter().flat_map(|t: &[u32; 3]| t.map(|v| uv_of(positions[v as usize]))).collect();
         let mut m = mesh(positions, triangles);

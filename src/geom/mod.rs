@@ -1,3 +1,6 @@
 //! Geometry shared by several stages.
 
+pub mod edges;
 pub mod nearest;
+pub mod points;
+pub mod texture;

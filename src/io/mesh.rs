@@ -77,16 +77,7 @@ impl Mesh {
 
     /// Counts of edges by how many triangles use them: (boundary, non-manifold).
     pub fn edge_counts(&self) -> (usize, usize) {
-        let mut uses: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 3 / 2);
-        for t in &self.triangles {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                *uses.entry((a.min(b), a.max(b))).or_default() += 1;
-            }
-        }
-        let boundary = uses.values().filter(|&&n| n == 1).count();
-        let non_manifold = uses.values().filter(|&&n| n > 2).count();
-        (boundary, non_manifold)
+        crate::geom::edges::edge_counts(&self.triangles)
     }
 
     pub fn is_closed(&self) -> bool {

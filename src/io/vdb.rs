@@ -159,7 +159,7 @@ fn find<'a>(meta: &'a [MetaEntry], key: &str) -> Option<&'a MetaEntry> {
 pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
     check_input_file(path)?;
     let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
-    let data = bridge::read_level_file(path_str).map_err(|e| Error::file(path, e.what()))?;
+    let data = bridge::read_level_file(path_str).map_err(|e| Error::file(path, read_failure(e.what())))?;
     let missing = |key: &str| Error::file(path, format!("has no '{key}' metadata; not a shapeshifter level file"));
     let resolution = find(&data.meta, "shapeshifter_resolution").ok_or_else(|| missing("shapeshifter_resolution"))?.number;
     let index = find(&data.meta, "shapeshifter_level").ok_or_else(|| missing("shapeshifter_level"))?.number;
@@ -214,5 +214,16 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
 pub fn summarise(path: &Path) -> Result<Vec<GridSummary>> {
     check_input_file(path)?;
     let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
-    bridge::summarise_vdb_file(path_str).map_err(|e| Error::file(path, e.what()))
+    bridge::summarise_vdb_file(path_str).map_err(|e| Error::file(path, read_failure(e.what())))
+}
+
+/// OpenVDB's message for a file it could not read, with what it usually
+/// means: a cut-off file makes OpenVDB read garbage as the next grid's type
+/// name and report "Grid type is not registered".
+fn read_failure(what: &str) -> String {
+    if what.contains("not registered") || what.contains("end of file") || what.contains("EOF") {
+        format!("truncated or damaged level file (OpenVDB: {what})")
+    } else {
+        what.to_string()
+    }
 }

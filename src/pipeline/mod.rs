@@ -479,17 +479,13 @@ pub fn record_config(dir: &Path, config: &Config) -> Result<()> {
 /// The surface voxels (mask > 0) of a level as oriented coloured points in
 /// the exemplar's frame; spacing = the level's voxel size in world units. An
 /// error when there are none (nothing to mesh or write).
-pub fn oriented_points(level: &Level) -> Result<crate::recon::OrientedPoints> {
-    let keep: Vec<usize> = (0..level.len()).filter(|&i| level.mask[i] > 0.0).collect();
-    if keep.is_empty() {
+pub fn oriented_points(level: &Level) -> Result<crate::geom::points::OrientedPoints> {
+    let mut points = crate::geom::points::OrientedPoints::from_level(level);
+    if points.is_empty() {
         return Err(Error::Invalid("the level has no active voxels (mask > 0)".into()));
     }
-    Ok(crate::recon::OrientedPoints {
-        positions: keep.iter().map(|&i| level.point_world(i).as_vec3()).collect(),
-        normals: keep.iter().map(|&i| level.normals[i].normalize_or_zero()).collect(),
-        colours: keep.iter().map(|&i| level.colours[i]).collect(),
-        spacing: (level.voxel_size() / level.frame.scale) as f32,
-    })
+    points.normals.iter_mut().for_each(|n| *n = n.normalize_or_zero());
+    Ok(points)
 }
 
 /// Meshes a level: Poisson for closed exemplars, APSS for open ones unless

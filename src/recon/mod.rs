@@ -41,6 +41,7 @@ mod tests;
 
 use glam::Vec3;
 use crate::geom::nearest::Nearest;
+pub use crate::geom::points::OrientedPoints;
 use crate::io::poisson;
 use spatial::HashGrid;
 use std::time::Instant;
@@ -67,18 +68,6 @@ impl std::fmt::Display for Method {
     }
 }
 
-/// Oriented, coloured points: the finest level of a grid, typically.
-#[derive(Clone, Debug, Default)]
-pub struct OrientedPoints {
-    pub positions: Vec<Vec3>,
-    /// Outward normals, one per position (need not be unit length).
-    pub normals: Vec<Vec3>,
-    /// Colours in [0,1], one per position, or empty.
-    pub colours: Vec<Vec3>,
-    /// Sample spacing in world units (the voxel size); <= 0: estimated.
-    pub spacing: f32,
-}
-
 /// A triangle mesh with optional vertex colours (empty when the points had none).
 #[derive(Clone, Debug, Default)]
 pub struct ReconMesh {
@@ -91,23 +80,7 @@ pub struct ReconMesh {
 impl ReconMesh {
     /// Edges used by exactly one triangle (0 for a closed surface).
     pub fn boundary_edge_count(&self) -> usize {
-        let mut edges: Vec<(u32, u32)> = self
-            .triangles
-            .iter()
-            .flat_map(|t| (0..3).map(move |i| (t[i].min(t[(i + 1) % 3]), t[i].max(t[(i + 1) % 3]))))
-            .collect();
-        edges.sort_unstable();
-        let mut count = 0;
-        let mut i = 0;
-        while i < edges.len() {
-            let mut j = i;
-            while j < edges.len() && edges[j] == edges[i] {
-                j += 1;
-            }
-            count += (j - i == 1) as usize;
-            i = j;
-        }
-        count
+        crate::geom::edges::edge_counts(&self.triangles).0
     }
 }
 

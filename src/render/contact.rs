@@ -14,7 +14,7 @@
 use glam::Vec3;
 use image::{Rgb, RgbImage};
 
-use super::{render_points, PointSet, RenderError, RenderOptions, Result, Zoom};
+use super::{render_points, OrientedPoints, RenderError, RenderOptions, Result, Zoom};
 use crate::level::Level;
 
 /// How a contact sheet is laid out.
@@ -46,8 +46,8 @@ pub fn contact_sheet(entries: &[(String, &Level)], opts: &SheetOptions) -> Resul
     if entries.is_empty() {
         return Err(RenderError::Invalid("a contact sheet needs at least one level".into()));
     }
-    let sets: Vec<PointSet> = entries.iter().map(|(_, l)| PointSet::from_level(l)).collect();
-    let bounds = |s: &PointSet| {
+    let sets: Vec<OrientedPoints> = entries.iter().map(|(_, l)| OrientedPoints::from_level(l)).collect();
+    let bounds = |s: &OrientedPoints| {
         s.positions.iter().filter(|p| p.is_finite()).fold(None, |acc: Option<(Vec3, Vec3)>, &p| match acc {
             None => Some((p, p)),
             Some((lo, hi)) => Some((lo.min(p), hi.max(p))),

@@ -29,6 +29,7 @@ use glam::{Vec2, Vec3};
 use image::RgbImage;
 use rayon::prelude::*;
 
+use crate::geom::points::OrientedPoints;
 use crate::level::Level;
 use crate::io::mesh::{Mesh, MeshColours};
 
@@ -68,7 +69,7 @@ pub struct RenderOptions {
     pub azimuth_deg: f32,
     /// Camera height above the horizontal plane, degrees (clamped to +-89.9).
     pub elevation_deg: f32,
-    /// Splat radius in voxel sizes (multiples of [`PointSet::spacing`]).
+    /// Splat radius in voxel sizes (multiples of [`OrientedPoints::spacing`]).
     /// 0.9 leaves no holes in a one-point-per-voxel surface sampling (a test
     /// checks it) while keeping splats small enough to show detail.
     pub point_size: f32,
@@ -125,63 +126,16 @@ pub enum RenderError {
 
 pub type Result<T> = std::result::Result<T, RenderError>;
 
-/// Oriented, coloured points: what a level looks like as a surface.
-/// Struct of arrays, all of the same length.
-#[derive(Clone, Debug, Default)]
-pub struct PointSet {
-    /// World units (the exemplar's own frame).
-    pub positions: Vec<Vec3>,
-    /// Unit normals; their sign does not matter (two-sided lighting).
-    pub normals: Vec<Vec3>,
-    /// RGB in [0, 1].
-    pub colours: Vec<Vec3>,
-    /// Typical distance between neighbouring points, world units (a level's
-    /// voxel size); the splat radius is `point_size * spacing`.
-    pub spacing: f32,
-}
-
-impl PointSet {
-    /// The surface points of the voxels with `mask > 0`, in the exemplar's
-    /// own world frame, with `spacing` = the level's voxel size in world units.
-    pub fn from_level(level: &Level) -> PointSet {
-        let spacing = (level.voxel_size() / level.frame.scale) as f32;
-        if level.mask.par_iter().all(|&m| m > 0.0) {
-            // Every voxel active (the usual case): copy, no index list.
-            return PointSet {
-                positions: (0..level.len()).into_par_iter().map(|i| level.point_world(i).as_vec3()).collect(),
-                normals: level.normals.clone(),
-                colours: level.colours.clone(),
-                spacing,
-            };
-        }
-        let keep: Vec<u32> =
-            (0..level.len() as u32).into_par_iter().filter(|&i| level.mask[i as usize] > 0.0).collect();
-        PointSet {
-            positions: keep.par_iter().map(|&i| level.point_world(i as usize).as_vec3()).collect(),
-            normals: keep.par_iter().map(|&i| level.normals[i as usize]).collect(),
-            colours: keep.par_iter().map(|&i| level.colours[i as usize]).collect(),
-            spacing,
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        self.positions.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.positions.is_empty()
-    }
-}
 
 /// Renders a level's active voxels as lit splats (see [`render_points`]).
 pub fn render_level(level: &Level, opts: &RenderOptions) -> Result<RgbImage> {
-    render_points(&PointSet::from_level(level), opts)
+    render_points(&OrientedPoints::from_level(level), opts)
 }
 
 /// Renders oriented points as z-buffered, lit screen-space disc splats of
 /// radius `opts.point_size * points.spacing` (world units, projected).
 /// Points with a non-finite position are skipped.
-pub fn render_points(points: &PointSet, opts: &RenderOptions) -> Result<RgbImage> {
+pub fn render_points(points: &OrientedPoints, opts: &RenderOptions) -> Result<RgbImage> {
     check_size(opts)?;
     let n = points.len();
     if n == 0 {
@@ -293,7 +247,7 @@ pub fn render_mesh(mesh: &Mesh, opts: &RenderOptions) -> Result<RgbImage> {
         let wts = barycentric(a, b, c, Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
         let colour = if let Some(t) = texture {
             let uv = wts.x * t.uvs[3 * id] + wts.y * t.uvs[3 * id + 1] + wts.z * t.uvs[3 * id + 2];
-            sample_bilinear(&t.image, uv)
+            crate::geom::texture::sample_bilinear(&t.image, uv).unwrap_or(MESH_GREY)
         } else {
             match &mesh.colours {
                 MeshColours::None => MESH_GREY,
@@ -621,28 +575,6 @@ fn barycentric(a: Vec3, b: Vec3, c: Vec3, p: Vec2) -> Vec3 {
     }
 }
 
-/// Bilinear texture lookup, RGB in [0,1]. OBJ convention: v = 0 is the
-/// bottom row; UVs outside [0,1] wrap (repeat).
-fn sample_bilinear(img: &RgbImage, uv: Vec2) -> Vec3 {
-    let (w, h) = (img.width() as i64, img.height() as i64);
-    let u = uv.x - uv.x.floor();
-    let v = uv.y - uv.y.floor();
-    let fx = u * w as f32 - 0.5;
-    let fy = (1.0 - v) * h as f32 - 0.5;
-    if !(fx.is_finite() && fy.is_finite()) {
-        return MESH_GREY;
-    }
-    let (x0, y0) = (fx.floor(), fy.floor());
-    let (tx, ty) = (fx - x0, fy - y0);
-    let texel = |x: i64, y: i64| {
-        let p = img.get_pixel(x.rem_euclid(w) as u32, y.clamp(0, h - 1) as u32).0;
-        Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) / 255.0
-    };
-    let (x0, y0) = (x0 as i64, y0 as i64);
-    let top = texel(x0, y0).lerp(texel(x0 + 1, y0), tx);
-    let bottom = texel(x0, y0 + 1).lerp(texel(x0 + 1, y0 + 1), tx);
-    top.lerp(bottom, ty)
-}
 
 /// Lit colour of a surface element with normal `n` (any length, any sign)
 /// and RGB `colour` in [0,1].
@@ -792,7 +724,7 @@ mod tests {
 
     #[test]
     fn flipped_normals_still_light() {
-        let mut points = PointSet::from_level(&sphere_level(32, 0.8, Vec3::ONE));
+        let mut points = OrientedPoints::from_level(&sphere_level(32, 0.8, Vec3::ONE));
         let a = render_points(&points, &opts(128)).unwrap();
         points.normals.iter_mut().for_each(|n| *n = -*n);
         let b = render_points(&points, &opts(128)).unwrap();
@@ -801,9 +733,9 @@ mod tests {
 
     /// A `size` x `size` square of points at depth `z` (towards a camera at
     /// azimuth 0, elevation 0), facing it.
-    fn square(size: f32, z: f32, colour: Vec3, spacing: f32) -> PointSet {
+    fn square(size: f32, z: f32, colour: Vec3, spacing: f32) -> OrientedPoints {
         let n = (size / spacing) as i32;
-        let mut points = PointSet { spacing, ..Default::default() };
+        let mut points = OrientedPoints { spacing, ..Default::default() };
         for i in 0..=n {
             for j in 0..=n {
                 let p = Vec3::new(i as f32 * spacing - size / 2.0, j as f32 * spacing - size / 2.0, z);
@@ -850,7 +782,7 @@ mod tests {
         let mut level = sphere_level(16, 0.8, Vec3::ONE);
         level.frame = Frame { centre: DVec3::new(10.0, 0.0, -5.0), scale: 0.5 };
         level.mask[0] = -1.0;
-        let points = PointSet::from_level(&level);
+        let points = OrientedPoints::from_level(&level);
         assert_eq!(points.len(), level.len() - 1);
         assert!((points.spacing - 2.0 / 16.0 / 0.5).abs() < 1e-6);
         let p = points.positions[0];
@@ -902,7 +834,7 @@ mod tests {
 
     #[test]
     fn bad_inputs_are_errors() {
-        let empty = PointSet::default();
+        let empty = OrientedPoints::default();
         let err = render_points(&empty, &opts(64)).unwrap_err();
         assert_eq!(err.to_string(), "nothing to render: no active voxels");
         let mut level = sphere_level(8, 0.8, Vec3::ONE);
@@ -912,7 +844,7 @@ mod tests {
         mesh.triangles.clear();
         assert!(matches!(render_mesh(&mesh, &opts(64)), Err(RenderError::NoTriangles)));
         let zero = RenderOptions { width: 0, ..opts(64) };
-        let points = PointSet::from_level(&sphere_level(8, 0.8, Vec3::ONE));
+        let points = OrientedPoints::from_level(&sphere_level(8, 0.8, Vec3::ONE));
         assert!(matches!(render_points(&points, &zero), Err(RenderError::BadSize { .. })));
         let mut mesh = cube(false);
         mesh.triangles[0][0] = 99;

@@ -4,15 +4,33 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// `../shared/data` beside the project, if present. Tests that need it skip
-/// with a message where it is absent (a user's fresh checkout has none).
+/// `../shared/data` beside the project, if present; where it is absent (a
+/// user's fresh checkout has none) the test is recorded as skipped ([`skip`]).
 pub fn shared_data(rel: &str) -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
     if p.exists() {
         Some(p)
     } else {
-        eprintln!("skipping: {} is absent (../shared/data is not beside this checkout)", p.display());
+        skip(&format!("{} is absent (../shared/data is not beside this checkout)", p.display()));
         None
+    }
+}
+
+/// Records that the calling test cannot run here (the caller then returns):
+/// a line on stderr and in `target/test-skips.log`, which `make test` counts
+/// and prints at the end, so a skip never passes as "ok" unseen. With
+/// SHAPESHIFTER_NO_SKIPS set (CI, where ../shared/data and every client are
+/// present) a skip is a failure.
+pub fn skip(reason: &str) {
+    let test = std::thread::current().name().unwrap_or("?").to_string();
+    if std::env::var_os("SHAPESHIFTER_NO_SKIPS").is_some() {
+        panic!("{test} would skip, and SHAPESHIFTER_NO_SKIPS is set: {reason}");
+    }
+    eprintln!("SKIPPED {test}: {reason}");
+    let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-skips.log");
+    if let Ok(mut f) = std::fs::OpenOptions::new().create(true).append(true).open(log) {
+        use std::io::Write;
+        let _ = writeln!(f, "{test}: {reason}");
     }
 }
 
@@ -41,6 +59,7 @@ pub fn assert_clean_failure(o: &Output, file: &str, problem: &str) {
     let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
     assert_eq!(lines.len(), 1, "expected one error line, got: {err}");
     assert!(lines[0].contains(file), "error does not name {file}: {}", lines[0]);
+    assert!(!problem.trim().is_empty(), "say which problem the error must name");
     assert!(lines[0].to_lowercase().contains(&problem.to_lowercase()), "error does not say '{problem}': {}", lines[0]);
 }
 
