@@ -46,7 +46,7 @@ TOWER := ../shared/data/towerruins/towerruins.obj
 bench: build
 	cargo run --release $(CARGO_FEATURES) --example encode_bench
 	cargo run --release $(CARGO_FEATURES) --example conv_bench
-	if [ -f $(TOWER) ]; then cargo run --release $(CARGO_FEATURES) --example recon_bench -- all mesh=$(TOWER); \
+	if [ -f $(TOWER) ]; then cargo run --release $(CARGO_FEATURES) --example recon_bench -- all --mesh $(TOWER); \
 	else cargo run --release $(CARGO_FEATURES) --example recon_bench; fi
 	cargo run --release $(CARGO_FEATURES) --example metrics_bench
 	if [ -f $(TOWER) ]; then $(MAKE) decimate-bench; fi
@@ -57,13 +57,13 @@ decimate-bench: build
 	./target/release/shapeshifter encode $(TOWER) -o out/decimate
 	./target/release/shapeshifter mesh out/decimate/level_4.vdb -o out/decimate/full.ply
 	cargo run --release $(CARGO_FEATURES) --example decimate_bench -- \
-	  $(TOWER) out/decimate/level_4.vdb out/decimate/full.ply out/decimate
+	  --mesh $(TOWER) --level out/decimate/level_4.vdb --full-mesh out/decimate/full.ply --out out/decimate
 
 # A long mutation campaign against every reader (README, "Hostile files").
 COUNT ?= 2000
 SEED ?= 1
 fuzz: build
-	cargo run --release $(CARGO_FEATURES) --example hostile_campaign -- count=$(COUNT) seed=$(SEED)
+	cargo run --release $(CARGO_FEATURES) --example hostile_campaign -- --count $(COUNT) --seed $(SEED)
 
 clean:
 	cargo clean

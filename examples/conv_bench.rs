@@ -12,13 +12,15 @@
 //! Then kernel-map construction (k = 3, 5) on the tower's 256^3 level and on a
 //! ~1.8M-voxel shell.
 //!
-//! `cargo run --release --example conv_bench [-- --no-tune] [-- --quick] [-- --maps-only]
-//!  [-- --mesh PATH]`
-//! Env `SPARSE_CHUNK_BYTES` overrides the CPU im2col block size.
+//! `cargo run --release --example conv_bench [-- [--no-tune] [--quick] [--maps-only]
+//!  [--mesh PATH] [--chunk-bytes N]]`
+//! `--chunk-bytes` (env `SPARSE_CHUNK_BYTES`) overrides the CPU im2col block size.
 
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
+use clap::Parser;
 use glam::{IVec3, Vec3};
 use shapeshifter::encode::{encode, EncodeOptions};
 use shapeshifter::learn::grid::SparseGrid;
@@ -60,33 +62,50 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// Sparse convolution against a matmul of the same arithmetic, then
+/// kernel-map construction.
+#[derive(Parser, Debug)]
+struct Args {
+    /// Leave the allocator untuned.
+    #[arg(long)]
+    no_tune: bool,
+    /// 3 timed runs per case instead of 7.
+    #[arg(long)]
+    quick: bool,
+    /// Only the kernel maps, no convolutions.
+    #[arg(long)]
+    maps_only: bool,
+    /// The mesh whose levels are measured (synthetic shells where absent).
+    #[arg(long, value_name = "PATH", default_value = "../shared/data/towerruins/towerruins.obj")]
+    mesh: PathBuf,
+    /// CPU im2col block size, bytes (default: the library's).
+    #[arg(long, value_name = "N", env = "SPARSE_CHUNK_BYTES")]
+    chunk_bytes: Option<usize>,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    if !args.iter().any(|a| a == "--no-tune") {
+    let args = Args::parse();
+    if !args.no_tune {
         shapeshifter::util::alloc::tune_allocator();
     }
-    if let Ok(b) = std::env::var("SPARSE_CHUNK_BYTES") {
-        set_cpu_chunk_bytes(b.parse().expect("SPARSE_CHUNK_BYTES"));
+    if let Some(b) = args.chunk_bytes {
+        set_cpu_chunk_bytes(b);
     }
-    let quick = args.iter().any(|a| a == "--quick");
+    let quick = args.quick;
     let reps = if quick { 3 } else { 7 };
     tch::manual_seed(0);
     println!(
         "libtorch threads: {}, rayon threads: {}, malloc tuned: {}",
         tch::get_num_threads(),
         rayon::current_num_threads(),
-        !args.iter().any(|a| a == "--no-tune")
+        !args.no_tune
     );
 
-    let maps_only = args.iter().any(|a| a == "--maps-only");
-    let mesh_path = args
-        .iter()
-        .position(|a| a == "--mesh")
-        .and_then(|i| args.get(i + 1).cloned())
-        .unwrap_or_else(|| "../shared/data/towerruins/towerruins.obj".into());
+    let maps_only = args.maps_only;
+    let mesh_path = args.mesh.display();
     // The exemplar's own levels (paper settings: 1024 sampling, 16..256), coordinates only.
-    let levels: Option<Vec<Vec<IVec3>>> = if std::path::Path::new(&mesh_path).exists() {
-        let m = mesh::load(std::path::Path::new(&mesh_path)).expect("load the benchmark mesh");
+    let levels: Option<Vec<Vec<IVec3>>> = if args.mesh.exists() {
+        let m = mesh::load(&args.mesh).expect("load the benchmark mesh");
         let (levels, _) = encode(&m, &EncodeOptions::default()).expect("encode");
         println!("{mesh_path}: levels {:?}", levels.iter().map(|l| (l.resolution, l.len())).collect::<Vec<_>>());
         Some(levels.into_iter().map(|l| l.coords).collect())

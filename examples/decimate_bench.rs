@@ -6,11 +6,13 @@
 //! idle machine would take) and the sizes of the binary PLY and .glb files.
 //! Prints a Markdown table.
 //!
-//! Usage: decimate_bench EXEMPLAR LEVEL.vdb FULL_MESH.ply OUT_DIR [BUDGET ...]
+//! Usage: decimate_bench --mesh EXEMPLAR --level LEVEL.vdb --full-mesh FULL_MESH.ply
+//!   --out OUT_DIR [--budget N ...]
 //! (budgets default to 200000 100000 50000 20000; the meshes are kept in OUT_DIR)
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
+use clap::Parser;
 use shapeshifter::io::mesh::{self, DecimateOptions};
 use shapeshifter::{eval::metrics, io::vdb};
 
@@ -22,24 +24,38 @@ fn cpu_seconds() -> f64 {
     t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
+/// Decimates a level's full mesh to triangle budgets and compares each with
+/// the exemplar; prints a Markdown table.
+#[derive(Parser, Debug)]
+struct Args {
+    /// The exemplar mesh the light meshes are compared with.
+    #[arg(long, value_name = "PATH")]
+    mesh: PathBuf,
+    /// The level file the full mesh was made from (its voxel is the unit of
+    /// the distances).
+    #[arg(long, value_name = "PATH")]
+    level: PathBuf,
+    /// The level's full mesh, to be decimated.
+    #[arg(long, value_name = "PATH")]
+    full_mesh: PathBuf,
+    /// Folder for the light meshes (PLY and .glb; created).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Triangle budgets (repeatable, or comma-separated).
+    #[arg(long = "budget", value_name = "N", value_delimiter = ',', default_values_t = [200_000, 100_000, 50_000, 20_000])]
+    budgets: Vec<usize>,
+}
+
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    if args.len() < 4 {
-        anyhow::bail!("usage: decimate_bench EXEMPLAR LEVEL.vdb FULL_MESH.ply OUT_DIR [BUDGET ...]");
-    }
-    let (exemplar, level, full, out) = (&args[0], &args[1], &args[2], &args[3]);
-    let budgets: Vec<usize> = if args.len() > 4 {
-        args[4..].iter().map(|s| s.parse()).collect::<Result<_, _>>()?
-    } else {
-        vec![200_000, 100_000, 50_000, 20_000]
-    };
-    let out = PathBuf::from(out);
+    let args = Args::parse();
+    let budgets = args.budgets;
+    let out = args.out;
     std::fs::create_dir_all(&out)?;
-    let exemplar = mesh::load(Path::new(exemplar))?;
-    let (level, _) = vdb::read_level(Path::new(level))?;
+    let exemplar = mesh::load(&args.mesh)?;
+    let (level, _) = vdb::read_level(&args.level)?;
     // One voxel of the level in the exemplar's units.
     let voxel = (level.voxel_size() / level.frame.scale) as f32;
-    let full = mesh::load(Path::new(full))?;
+    let full = mesh::load(&args.full_mesh)?;
     let reference = exemplar.surface_samples(300_000);
 
     println!("| triangles | vertices | Chamfer (voxels) | Hausdorff (voxels) | decimation wall / CPU (s) | PLY (MB) | GLB (MB) |");

@@ -2,12 +2,29 @@
 //! demo exemplar where that is absent) several times at the paper's settings
 //! and prints the median time of every stage and the voxel counts.
 //!
-//! Usage: encode_bench [MESH.obj] [RUNS] [qem|average]
+//! Usage: encode_bench [--mesh MESH.obj] [--runs N] [--pooling qem|average]
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+use clap::Parser;
 use shapeshifter::encode::{encode, EncodeOptions, EncodeStats, Pooling};
 use shapeshifter::io::mesh;
+
+/// Encodes a mesh several times at the paper's settings; prints the median
+/// time of every stage and the voxel counts.
+#[derive(Parser, Debug)]
+struct Args {
+    /// The mesh to encode (default: ../shared/data/towerruins/towerruins.obj,
+    /// or the embedded demo exemplar where that is absent).
+    #[arg(long, value_name = "PATH")]
+    mesh: Option<PathBuf>,
+    /// Encodings to take the medians of.
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    runs: usize,
+    /// How children pool into parents.
+    #[arg(long, default_value = "qem", value_parser = ["qem", "average"])]
+    pooling: String,
+}
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -36,18 +53,18 @@ fn cpu_seconds() -> f64 {
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let default = "../shared/data/towerruins/towerruins.obj";
-    let path = args.get(1).map_or(default, |s| s.as_str());
-    let runs: usize = args.get(2).map_or(5, |s| s.parse().expect("RUNS"));
-    let pooling = match args.get(3).map(String::as_str) {
-        Some("average") => Pooling::Average,
+    let args = Args::parse();
+    let default = Path::new("../shared/data/towerruins/towerruins.obj");
+    let path = args.mesh.as_deref().unwrap_or(default);
+    let runs = args.runs;
+    let pooling = match args.pooling.as_str() {
+        "average" => Pooling::Average,
         _ => Pooling::Qem,
     };
-    let mesh = match mesh::load(Path::new(path)) {
+    let mesh = match mesh::load(path) {
         Ok(m) => m,
-        Err(_) if args.get(1).is_none() && !Path::new(default).exists() => {
-            println!("{default} absent: the embedded demo exemplar instead");
+        Err(_) if args.mesh.is_none() && !default.exists() => {
+            println!("{} absent: the embedded demo exemplar instead", default.display());
             shapeshifter::encode::exemplar::ruined_tower(&Default::default())
         }
         Err(e) => {

@@ -3,17 +3,12 @@
 //!
 //! ```sh
 //! cargo build --release
-//! cargo run --release --example hostile_campaign -- count=2000 seed=7
-//! cargo run --release --example hostile_campaign -- count=150 seed=1 \
-//!     file=../shared/data/cgal/fandisk.obj file=out/tower/level_1.vdb builtin=0
+//! cargo run --release --example hostile_campaign -- --count 2000 --seed 7
+//! cargo run --release --example hostile_campaign -- --count 150 --seed 1 --no-builtin \
+//!     --file ../shared/data/cgal/fandisk.obj --file out/tower/level_1.vdb
 //! ```
-//! Arguments (`key=value`): `count` mutated inputs per seed input (default
-//! 500), `seed` (default 1), `threads` (default 2), `timeout` seconds per run
-//! (default 60), `bin` (default target/release/shapeshifter), `file=PATH` (also
-//! mutate this file; repeatable), `builtin=0` (skip the generated inputs),
-//! `keep=DIR` (copy every input that broke the contract there, with its
-//! siblings). Prints one table row per format and every contract breach; exits
-//! 1 if there was any.
+//! Prints one table row per format and every contract breach; exits 1 if
+//! there was any. `--help` lists the options.
 
 #[path = "../tests/common/hostile.rs"]
 mod hostile;
@@ -21,34 +16,53 @@ mod hostile;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use clap::Parser;
+
+/// Mutates the seed inputs and runs the real binary on every mutation.
+#[derive(Parser, Debug)]
+struct Args {
+    /// Mutated inputs per seed input.
+    #[arg(long, value_name = "N", default_value_t = 500)]
+    count: usize,
+    /// Seed of the mutations.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    seed: u64,
+    /// Children run at a time.
+    #[arg(long, value_name = "N", default_value_t = 2)]
+    threads: usize,
+    /// Time limit of one run, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
+    timeout: f64,
+    /// The binary under test (default: target/release/shapeshifter of this
+    /// checkout).
+    #[arg(long, value_name = "PATH")]
+    bin: Option<PathBuf>,
+    /// Also mutate this file (repeatable).
+    #[arg(long, value_name = "PATH")]
+    file: Vec<PathBuf>,
+    /// Skip the generated seed inputs (mutate only the --file ones).
+    #[arg(long)]
+    no_builtin: bool,
+    /// Copy every input that broke the contract into this folder, with its
+    /// siblings.
+    #[arg(long, value_name = "DIR")]
+    keep: Option<PathBuf>,
+}
+
 fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let mut c = hostile::Campaign {
-        bin: root.join("target/release/shapeshifter"),
-        seed: 1,
-        count: 500,
-        limit: Duration::from_secs(60),
-        threads: 2,
-        keep_failures: None,
+    let c = hostile::Campaign {
+        bin: args.bin.unwrap_or_else(|| root.join("target/release/shapeshifter")),
+        seed: args.seed,
+        count: args.count,
+        limit: Duration::from_secs_f64(args.timeout),
+        threads: args.threads,
+        keep_failures: args.keep,
     };
-    let (mut files, mut builtin) = (Vec::new(), true);
-    for a in std::env::args().skip(1) {
-        let (k, v) = a.split_once('=').ok_or_else(|| anyhow::anyhow!("expected key=value, got {a}"))?;
-        match k {
-            "count" => c.count = v.parse()?,
-            "seed" => c.seed = v.parse()?,
-            "threads" => c.threads = v.parse()?,
-            "timeout" => c.limit = Duration::from_secs_f64(v.parse()?),
-            "bin" => c.bin = PathBuf::from(v),
-            "file" => files.push(PathBuf::from(v)),
-            "builtin" => builtin = v != "0",
-            "keep" => c.keep_failures = Some(PathBuf::from(v)),
-            _ => anyhow::bail!("unknown argument {k}"),
-        }
-    }
     let work = tempfile::tempdir()?;
-    let mut seeds = if builtin { hostile::builtin_seeds(work.path()) } else { Vec::new() };
-    for f in &files {
+    let mut seeds = if args.no_builtin { Vec::new() } else { hostile::builtin_seeds(work.path()) };
+    for f in &args.file {
         seeds.push(hostile::file_seed(f)?);
     }
     let start = Instant::now();

@@ -2,14 +2,25 @@
 //! voxelisation at 256 of a ~20k-triangle procedural mesh, the exemplar's patch
 //! dictionary, and LP-IoU/LP-F-score with 1000 patches. Median of 3 runs each.
 //!
-//! cargo run --release --example metrics_bench [resolution]
+//! cargo run --release --example metrics_bench [-- --resolution N]
 
 use std::time::Instant;
 
+use clap::Parser;
 use glam::Vec3;
 use shapeshifter::level::Frame;
 use shapeshifter::io::mesh::Mesh;
 use shapeshifter::eval::metrics::*;
+use shapeshifter::util::rng::Rng;
+
+/// Times voxelisation, the patch dictionary, LP scores, IoU and Chamfer on
+/// procedural bumpy spheres.
+#[derive(Parser, Debug)]
+struct Args {
+    /// Evaluation lattice: voxels along the longest side of the exemplar.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_RESOLUTION)]
+    resolution: u32,
+}
 
 /// A closed bumpy sphere: UV sphere with `rings` x `segs` quads, radius
 /// modulated by a few sines (phase `phase`), about 2 * rings * segs triangles.
@@ -53,7 +64,7 @@ fn median3<T>(mut f: impl FnMut() -> T) -> ((f64, f64), T) {
 }
 
 fn main() {
-    let res: u32 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(DEFAULT_RESOLUTION);
+    let res = Args::parse().resolution;
     println!("threads: {}", rayon::current_num_threads());
     let exemplar = bumpy_sphere(100, 100, 0.0);
     let variant = bumpy_sphere(100, 100, 1.3);
@@ -88,14 +99,10 @@ fn main() {
     // Harder cases for the pruning: a damaged variant (10% of its surface voxels
     // removed) and random voxels (30% density) in the exemplar's box.
     let mut rough = var.clone();
-    let mut state = 12345u64;
-    let mut rnd = move || {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        state >> 33
-    };
+    let mut rng = Rng::new(12345);
     let w = rough.words_per_row();
     for v in var.surface().voxels() {
-        if rnd() % 10 == 0 {
+        if rng.below(10) == 0 {
             let r = v[1] as usize + rough.dims[1] as usize * v[2] as usize;
             rough.bits[r * w + v[0] as usize / 64] &= !(1u64 << (v[0] % 64));
         }
@@ -110,7 +117,7 @@ fn main() {
     for z in nz / 6..nz * 5 / 6 {
         for y in ny / 6..ny * 5 / 6 {
             for x in nx / 6..nx * 5 / 6 {
-                if rnd() % 10 < 3 {
+                if rng.below(10) < 3 {
                     noise.set(x, y, z);
                 }
             }

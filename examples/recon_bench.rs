@@ -1,20 +1,20 @@
 //! Meshes a procedural shape sampled one point per voxel at 256^3 (like the
-//! finest level of an encoded exemplar, ~150k points), or with `mesh=PATH` the
-//! 256^3 level of that mesh as `encode` makes it (paper settings), with each
+//! finest level of an encoded exemplar, ~150k points), or with `--mesh PATH`
+//! the 256^3 level of that mesh as `encode` makes it (paper settings), with each
 //! method and prints time and peak memory. Each method runs in its own child
 //! process so that its peak RSS (VmHWM) is its own.
 //!
-//!   cargo run --release --example recon_bench [-- METHOD [key=value ...]]
-//!   cargo run --release --example recon_bench -- all mesh=../shared/data/towerruins/towerruins.obj
-//!   cargo run --release --example recon_bench -- poisson level=out/tower/level_4.vdb out=tower.ply
+//!   cargo run --release --example recon_bench [-- [METHOD] [OPTIONS]]
+//!   cargo run --release --example recon_bench -- all --mesh ../shared/data/towerruins/towerruins.obj
+//!   cargo run --release --example recon_bench -- poisson --level out/tower/level_4.vdb --out tower.ply
 //!
-//! `level=PATH` meshes the points of a level file (as `shapeshifter mesh` does);
-//! `out=PATH` also writes the mesh (PLY with vertex colours, exemplar frame).
-//!
-//! METHOD: all (default), poisson, apss.
-//! Keys: res=256 (sampling), tol= cluster= project=,
-//! resolution= (both), radius= band= (APSS).
+//! `--level PATH` meshes the points of a level file (as `shapeshifter mesh`
+//! does); `--out PATH` also writes the mesh (PLY with vertex colours, exemplar
+//! frame). METHOD: all (default), poisson, apss. `--help` lists the options.
 
+use std::path::PathBuf;
+
+use clap::Parser;
 use glam::Vec3;
 use rayon::prelude::*;
 use shapeshifter::recon::{apss, poisson_report, ApssOptions, OrientedPoints, PoissonOptions, ReconMesh};
@@ -128,33 +128,96 @@ pub fn accuracy(m: &ReconMesh, vs: f32) -> (f32, f32) {
     (d.iter().sum::<f32>() / d.len().max(1) as f32, d.iter().cloned().fold(0.0, f32::max))
 }
 
+/// Meshes a procedural shape, a mesh's 256^3 level or a level file with each
+/// method; prints time, peak memory and topology.
+#[derive(Parser, Debug)]
+struct Args {
+    /// Meshing method; `all` runs apss and poisson, each in a child process.
+    #[arg(default_value = "all", value_parser = ["all", "poisson", "apss"])]
+    method: String,
+    /// Mesh the 256^3 level of this exemplar mesh (encoded at paper settings)
+    /// instead of the procedural shape.
+    #[arg(long, value_name = "PATH")]
+    mesh: Option<PathBuf>,
+    /// Mesh the points of this level file (takes precedence over --mesh).
+    #[arg(long, value_name = "PATH")]
+    level: Option<PathBuf>,
+    /// Also write the mesh here (PLY with vertex colours, exemplar frame).
+    #[arg(long, value_name = "PATH")]
+    out: Option<PathBuf>,
+    /// Sampling resolution of the procedural shape (one point per voxel).
+    #[arg(long, value_name = "N", default_value_t = 256)]
+    res: i32,
+    /// Grid resolution of the mesher (both methods; default: the method's).
+    #[arg(long, value_name = "N")]
+    resolution: Option<u32>,
+    /// Poisson: solver tolerance (default: the method's).
+    #[arg(long, value_name = "X")]
+    tol: Option<f64>,
+    /// Poisson: width of the point-clustering cells, in spacings (<= 1:
+    /// every point; default: the method's).
+    #[arg(long, value_name = "X")]
+    cluster: Option<f32>,
+    /// Poisson: projection steps onto the points (default: the method's).
+    #[arg(long, value_name = "N")]
+    project: Option<u32>,
+    /// APSS: MLS support radius, in spacings (default: the method's).
+    #[arg(long, value_name = "X")]
+    radius: Option<f32>,
+    /// APSS: band around the points, in spacings (default: the method's).
+    #[arg(long, value_name = "X")]
+    band: Option<f32>,
+}
+
+impl Args {
+    /// The options again as command-line flags (METHOD left out), for the
+    /// child processes of `all`.
+    fn flags(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        let mut push = |flag: &str, value: Option<String>| {
+            if let Some(value) = value {
+                v.push(format!("--{flag}"));
+                v.push(value);
+            }
+        };
+        push("mesh", self.mesh.as_ref().map(|p| p.display().to_string()));
+        push("level", self.level.as_ref().map(|p| p.display().to_string()));
+        push("out", self.out.as_ref().map(|p| p.display().to_string()));
+        push("res", Some(self.res.to_string()));
+        push("resolution", self.resolution.map(|x| x.to_string()));
+        push("tol", self.tol.map(|x| x.to_string()));
+        push("cluster", self.cluster.map(|x| x.to_string()));
+        push("project", self.project.map(|x| x.to_string()));
+        push("radius", self.radius.map(|x| x.to_string()));
+        push("band", self.band.map(|x| x.to_string()));
+        v
+    }
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let method = args.first().cloned().unwrap_or_else(|| "all".into());
-    let get = |key: &str| -> Option<f64> {
-        args.iter().find_map(|a| a.strip_prefix(&format!("{key}=")).and_then(|v| v.parse().ok()))
-    };
+    let args = Args::parse();
+    let method = args.method.clone();
     if method == "all" {
         let exe = std::env::current_exe().unwrap();
         for m in ["apss", "poisson"] {
-            let status = std::process::Command::new(&exe).arg(m).args(&args[args.len().min(1)..]).status();
+            let status = std::process::Command::new(&exe).arg(m).args(args.flags()).status();
             if !matches!(status, Ok(s) if s.success()) {
                 eprintln!("{m}: failed ({status:?})");
             }
         }
         return;
     }
-    let res = get("res").unwrap_or(256.0) as i32;
-    let exemplar = args.iter().find_map(|a| a.strip_prefix("mesh="));
-    let level = args.iter().find_map(|a| a.strip_prefix("level="));
+    let res = args.res;
+    let exemplar = args.mesh.as_deref();
+    let level = args.level.as_deref();
     let t = Instant::now();
     let pts = match (exemplar, level) {
         (_, Some(path)) => {
-            let (level, _) = shapeshifter::io::vdb::read_level(std::path::Path::new(path)).expect("read level=PATH");
+            let (level, _) = shapeshifter::io::vdb::read_level(path).expect("read --level PATH");
             shapeshifter::pipeline::oriented_points(&level).expect("active voxels")
         }
         (Some(path), None) => {
-            let m = shapeshifter::io::mesh::load(std::path::Path::new(path)).expect("load mesh=PATH");
+            let m = shapeshifter::io::mesh::load(path).expect("load --mesh PATH");
             let (levels, _) = shapeshifter::encode::encode(&m, &Default::default()).expect("encode");
             shapeshifter::pipeline::oriented_points(levels.last().expect("levels")).expect("active voxels")
         }
@@ -165,7 +228,7 @@ fn main() {
         "{method}: {} points (one per voxel at {}^3 of {}), made in {:.2} s, {} rayon threads",
         pts.positions.len(),
         if exemplar.is_some() || level.is_some() { 256 } else { res },
-        level.or(exemplar).unwrap_or("the procedural shape"),
+        level.or(exemplar).map_or("the procedural shape".into(), |p| p.to_string_lossy()),
         t.elapsed().as_secs_f64(),
         rayon::current_num_threads()
     );
@@ -175,17 +238,17 @@ fn main() {
     let mesh = match method.as_str() {
         "apss" => {
             let mut o = ApssOptions::default();
-            o.resolution = get("resolution").map_or(o.resolution, |v| v as u32);
-            o.radius = get("radius").map_or(o.radius, |v| v as f32);
-            o.band = get("band").map_or(o.band, |v| v as f32);
+            o.resolution = args.resolution.unwrap_or(o.resolution);
+            o.radius = args.radius.unwrap_or(o.radius);
+            o.band = args.band.unwrap_or(o.band);
             apss(&pts, &o).unwrap()
         }
         "poisson" => {
             let mut o = PoissonOptions::default();
-            o.solver_tolerance = get("tol").unwrap_or(o.solver_tolerance);
-            o.resolution = get("resolution").map_or(o.resolution, |v| v as u32);
-            o.cluster = get("cluster").map_or(o.cluster, |v| v as f32);
-            o.project_steps = get("project").map_or(o.project_steps, |v| v as u32);
+            o.solver_tolerance = args.tol.unwrap_or(o.solver_tolerance);
+            o.resolution = args.resolution.unwrap_or(o.resolution);
+            o.cluster = args.cluster.unwrap_or(o.cluster);
+            o.project_steps = args.project.unwrap_or(o.project_steps);
             let (m, r) = poisson_report(&pts, &o).unwrap();
             println!("  {o:?}");
             println!(
@@ -217,7 +280,7 @@ fn main() {
         peak_rss_mib(),
         rss0
     );
-    if let Some(out) = args.iter().find_map(|a| a.strip_prefix("out=")) {
+    if let Some(out) = &args.out {
         let m = shapeshifter::io::mesh::Mesh {
             name: method.clone(),
             positions: mesh.positions,
@@ -225,6 +288,6 @@ fn main() {
             colours: shapeshifter::io::mesh::MeshColours::PerVertex(mesh.colours),
             texture: None,
         };
-        shapeshifter::io::mesh::save(&m, std::path::Path::new(out), true).expect("write out=PATH");
+        shapeshifter::io::mesh::save(&m, out, true).expect("write --out PATH");
     }
 }

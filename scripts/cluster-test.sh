@@ -118,7 +118,7 @@ done
 sinfo -h -o '%T' | grep -qE '^(idle|mixed)' || { echo "cluster-test: the node did not come up" >&2; exit 1; }
 echo "cluster-test: one-node cluster up: $(sinfo -h -o '%N %c CPUs %m MB %T')"
 
-"$ROOT/target/release/examples/demo_exemplar" "$WORK/mesh" > /dev/null
+"$ROOT/target/release/examples/demo_exemplar" --out "$WORK/mesh" > /dev/null
 MESH=$WORK/mesh/demo_tower.ply
 TINY=(--set encode.sampling_resolution=128 --set encode.finest_resolution=32
       --set train.level0_iterations=60 --set train.upper_iterations=30 --set train.upsampler_iterations=30

@@ -35,7 +35,7 @@ mkdir -p "$OUT"
 
 # A small but complete run: the demo exemplar through 32^3, two variants,
 # each meshed as mesh.ply decimated to 3000 triangles and mesh.glb.
-"$ROOT/target/release/examples/demo_exemplar" "$WORK/mesh" > /dev/null
+"$ROOT/target/release/examples/demo_exemplar" --out "$WORK/mesh" > /dev/null
 MESH=$WORK/mesh/demo_tower.ply
 "$BIN" -q run "$MESH" -o "$WORK/run" -n 2 --seed 1 \
   --set encode.sampling_resolution=128 --set encode.finest_resolution=32 \

@@ -55,7 +55,7 @@ if [ -f "$TOWER" ]; then
 else
   echo "poisson-vs-open3d: THE RUINED TOWER IS ABSENT ($TOWER, from ../shared/data):" \
     "measuring on the embedded demo exemplar instead; these figures are not the README's." >&2
-  "$ROOT/target/release/examples/demo_exemplar" "$OUT/demo" > /dev/null
+  "$ROOT/target/release/examples/demo_exemplar" --out "$OUT/demo" > /dev/null
   EXEMPLAR="$OUT/demo/demo_tower.ply"
 fi
 "$BIN" --quiet encode "$EXEMPLAR" -o "$OUT/level" > /dev/null
@@ -78,7 +78,7 @@ for i in $(seq "$RUNS"); do
   echo "run $i/$RUNS: ours $(tail -n1 "$OUT/ours.times" | xargs printf '%.2f') s, open3d $(tail -n1 "$OUT/open3d.times") s" >&2
 done
 
-"$FIDELITY" compare "$EXEMPLAR" "$LEVEL" "$OUT/ours.ply" "$OUT/open3d.ply" > "$OUT/fidelity.txt"
+"$FIDELITY" compare --mesh "$EXEMPLAR" --level "$LEVEL" "$OUT/ours.ply" "$OUT/open3d.ply" > "$OUT/fidelity.txt"
 row() {  # name, times file, mesh file
   local line
   line=$(grep -F "$3:" "$OUT/fidelity.txt")
