@@ -535,91 +535,33 @@ fn device(spec: &str) -> Result<tch::Device> {
     Ok(device)
 }
 
-enum Source {
-    File(PathBuf),
-    Demo,
-}
-
-/// Levels trained at once: `jobs`, or with 0 the cores divided by the libtorch
-/// threads per level (1 on a GPU: one device, shared).
-fn auto_jobs(jobs: usize, device: tch::Device, threads: i32) -> usize {
-    match jobs {
-        0 if device.is_cuda() => 1,
-        // libtorch's own thread count (--threads 0) already takes every core.
-        0 if threads <= 0 => 1,
-        0 => (std::thread::available_parallelism().map_or(1, |n| n.get()) / threads as usize).max(1),
-        j => j,
-    }
-}
-
-/// One exemplar through the whole pipeline into `out`: the five stages in one
-/// process (a cluster runs the same stages as separate jobs: `stage`).
-fn run_one(source: Source, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32) -> Result<()> {
-    let t0 = std::time::Instant::now();
-    let config = Config::load(&args.setup.profile, &args.setup.overrides)?;
+/// One exemplar through the whole pipeline into `out` ([`pipeline::run::run`]),
+/// and where everything went.
+fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32) -> Result<()> {
     let device = device(&args.setup.device)?;
-    let paths = pipeline::RunPaths::new(out);
-    let mut times = Vec::new();
-    let t = std::time::Instant::now();
-    let exemplar = match &source {
-        Source::File(p) => pipeline::ExemplarSource::File(p),
-        Source::Demo => pipeline::ExemplarSource::Demo,
+    let options = pipeline::run::RunOptions {
+        config: Config::load(&args.setup.profile, &args.setup.overrides)?,
+        device,
+        device_spec: args.setup.device.clone(),
+        n: args.n,
+        seed: args.seed,
+        jobs: args.jobs,
+        threads,
+        progress: !quiet,
+        exe: std::env::current_exe()?,
     };
-    let (source_name, _) = pipeline::run_encode(exemplar, &paths, &config)?;
-    times.push(("encode", t.elapsed().as_secs_f64()));
-    let t = std::time::Instant::now();
-    let jobs = auto_jobs(args.jobs, device, threads);
-    if jobs > 1 {
-        let exe = std::env::current_exe()?;
-        pipeline::train_concurrently(&paths, &config, &exe, threads.max(1), &args.setup.device, jobs, !quiet)?;
-    } else {
-        pipeline::run_train(&paths, &config, device, None, !quiet)?;
-    }
-    times.push(("train", t.elapsed().as_secs_f64()));
-    let t = std::time::Instant::now();
-    let options = SampleOptions::from_config(&config, args.n, args.seed);
-    // Variants are independent: with several jobs, shards of them are sampled
-    // and meshed by child processes (`stage sample/mesh --first K -n N`), which
-    // write exactly what one process writes.
-    let exe = std::env::current_exe()?;
-    let logs = out.join("logs");
-    if jobs > 1 && args.n > 1 {
-        std::fs::create_dir_all(&logs)?;
-        pipeline::run_shards(args.n, jobs, &logs, "sample", |first, count| {
-            let mut c = std::process::Command::new(&exe);
-            c.args(["--threads", &threads.max(1).to_string(), "stage", "sample"])
-                .arg(out)
-                .args(["--first", &first.to_string(), "-n", &count.to_string(), "--seed", &args.seed.to_string()])
-                .args(["--device", &args.setup.device]);
-            c
-        })?;
-    }
-    let dirs = pipeline::run_sample(&paths, &config, device, &options)?;
-    times.push(("sample", t.elapsed().as_secs_f64()));
-    let t = std::time::Instant::now();
-    if jobs > 1 && args.n > 1 {
-        pipeline::run_shards(args.n, jobs, &logs, "mesh", |first, count| {
-            let mut c = std::process::Command::new(&exe);
-            c.args(["stage", "mesh"]).arg(out).args(["--first", &first.to_string(), "-n", &count.to_string()]);
-            c
-        })?;
-    }
-    let meshed = pipeline::run_mesh(&paths, 0..args.n, &config.mesh)?;
-    log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
-    times.push(("mesh", t.elapsed().as_secs_f64()));
-    let t = std::time::Instant::now();
-    let evaluation = pipeline::run_eval(&paths, args.n)?;
-    times.push(("evaluate", t.elapsed().as_secs_f64()));
-    println!("\n{} -> {}", source_name, out.display());
+    let summary = pipeline::run::run(exemplar, out, &options)?;
+    let paths = pipeline::RunPaths::new(out);
+    println!("\n{} -> {}", summary.source_name, out.display());
     println!("  exemplar levels  {}", paths.exemplar().display());
     println!("  models           {}", paths.models().display());
-    println!("  variants         {} ({} folders, previews level_K.png)", paths.variants().display(), dirs.len());
+    println!("  variants         {} ({} folders, previews level_K.png)", paths.variants().display(), summary.variants);
     println!("  metrics          {}", paths.eval_json().display());
     println!("  contact sheet    {}", paths.contact_sheet().display());
     println!("  report           {}", paths.report().display());
-    println!("  time             {}  (total {:.0} s)",
-        times.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect::<Vec<_>>().join(", "), t0.elapsed().as_secs_f64());
-    match evaluation {
+    let stages: Vec<String> = summary.seconds.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect();
+    println!("  time             {}  (total {:.0} s)", stages.join(", "), summary.total_seconds);
+    match summary.evaluation {
         Some(e) => print!("{}", e.table()),
         None => println!("  (no variant could be scored: see the warning above)"),
     }
@@ -791,7 +733,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             if resume && !models.is_dir() {
                 anyhow::bail!("{}: --resume, but there is no models folder", models.display());
             }
-            let jobs = auto_jobs(jobs, device, cli.threads);
+            let jobs = pipeline::run::auto_jobs(jobs, device, cli.threads);
             if level.is_none() && jobs > 1 {
                 let todo = pipeline::levels_to_train(levels.len(), &manifest.source_sha256, &config, &models);
                 let exe = std::env::current_exe()?;
@@ -865,7 +807,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 } else {
                     output.clone()
                 };
-                if let Err(e) = run_one(Source::File(m.clone()), &out, &run, quiet, cli.threads) {
+                if let Err(e) = run_one(pipeline::ExemplarSource::File(m), &out, &run, quiet, cli.threads) {
                     let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
                     eprintln!("error: {}", msg.join(": "));
                     failed += 1;
@@ -878,7 +820,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Demo { output, run } => {
-            run_one(Source::Demo, &output, &run, quiet, cli.threads)?;
+            run_one(pipeline::ExemplarSource::Demo, &output, &run, quiet, cli.threads)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Mesh { inputs, output, format, method, resolution, depth, faces, preview, batch } => {

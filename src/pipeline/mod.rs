@@ -17,6 +17,7 @@
 
 pub mod batch;
 pub mod cluster;
+pub mod run;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

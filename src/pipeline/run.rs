@@ -1,0 +1,119 @@
+//! `run`: one exemplar through the five stages in one process, into one
+//! output folder (a cluster runs the same stages as separate jobs: `stage`,
+//! [`super::cluster`]). Independent levels train in child processes, and
+//! shards of variants are sampled and meshed by children, when `jobs` > 1.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::eval::evaluate::Evaluation;
+use crate::learn::sample::SampleOptions;
+
+use super::{ExemplarSource, RunPaths};
+
+/// What `run` needs besides the exemplar and the folder.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub config: Config,
+    pub device: tch::Device,
+    /// The `--device` text, passed on to child processes.
+    pub device_spec: String,
+    /// Variants to sample.
+    pub n: usize,
+    pub seed: u64,
+    /// Levels trained, and shards sampled and meshed, at once (0: as many as
+    /// the cores allow, [`auto_jobs`]).
+    pub jobs: usize,
+    /// libtorch threads per process (0: libtorch's own choice).
+    pub threads: i32,
+    pub progress: bool,
+    /// This program, for the child processes.
+    pub exe: PathBuf,
+}
+
+/// What a finished `run` produced.
+pub struct RunSummary {
+    pub source_name: String,
+    pub variants: usize,
+    /// Wall seconds per stage, in order.
+    pub seconds: Vec<(&'static str, f64)>,
+    pub total_seconds: f64,
+    /// None when no variant could be scored (a warning says why).
+    pub evaluation: Option<Evaluation>,
+}
+
+/// Levels trained at once: `jobs`, or with 0 the cores divided by the libtorch
+/// threads per level (1 on a GPU: one device, shared).
+pub fn auto_jobs(jobs: usize, device: tch::Device, threads: i32) -> usize {
+    match jobs {
+        0 if device.is_cuda() => 1,
+        // libtorch's own thread count (--threads 0) already takes every core.
+        0 if threads <= 0 => 1,
+        0 => (std::thread::available_parallelism().map_or(1, |n| n.get()) / threads as usize).max(1),
+        j => j,
+    }
+}
+
+/// Encode, train, sample, mesh and evaluate `exemplar` into `out`, reusing
+/// every stage whose inputs and configuration are unchanged.
+pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSummary> {
+    let t0 = Instant::now();
+    let config = &o.config;
+    let paths = RunPaths::new(out);
+    let mut seconds = Vec::new();
+    let mut stage = |name: &'static str, t: Instant| seconds.push((name, t.elapsed().as_secs_f64()));
+
+    let t = Instant::now();
+    let (source_name, _) = super::run_encode(exemplar, &paths, config)?;
+    stage("encode", t);
+
+    let t = Instant::now();
+    let jobs = auto_jobs(o.jobs, o.device, o.threads);
+    let threads = o.threads.max(1).to_string();
+    if jobs > 1 {
+        super::train_concurrently(&paths, config, &o.exe, o.threads.max(1), &o.device_spec, jobs, o.progress)?;
+    } else {
+        super::run_train(&paths, config, o.device, None, o.progress)?;
+    }
+    stage("train", t);
+
+    // Variants are independent: with several jobs, shards of them are sampled
+    // and meshed by child processes (`stage sample/mesh --first K -n N`), which
+    // write exactly what one process writes; the final in-process call then
+    // finds every shard done.
+    let t = Instant::now();
+    let sharded = jobs > 1 && o.n > 1;
+    let logs = out.join("logs");
+    if sharded {
+        std::fs::create_dir_all(&logs).map_err(|e| Error::file(&logs, e.to_string()))?;
+        super::run_shards(o.n, jobs, &logs, "sample", |first, count| {
+            let mut c = std::process::Command::new(&o.exe);
+            c.args(["--threads", &threads, "stage", "sample"])
+                .arg(out)
+                .args(["--first", &first.to_string(), "-n", &count.to_string(), "--seed", &o.seed.to_string()])
+                .args(["--device", &o.device_spec]);
+            c
+        })?;
+    }
+    let dirs = super::run_sample(&paths, config, o.device, &SampleOptions::from_config(config, o.n, o.seed))?;
+    stage("sample", t);
+
+    let t = Instant::now();
+    if sharded {
+        super::run_shards(o.n, jobs, &logs, "mesh", |first, count| {
+            let mut c = std::process::Command::new(&o.exe);
+            c.args(["stage", "mesh"]).arg(out).args(["--first", &first.to_string(), "-n", &count.to_string()]);
+            c
+        })?;
+    }
+    let meshed = super::run_mesh(&paths, 0..o.n, &config.mesh)?;
+    log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
+    stage("mesh", t);
+
+    let t = Instant::now();
+    let evaluation = super::run_eval(&paths, o.n)?;
+    stage("evaluate", t);
+    Ok(RunSummary { source_name, variants: dirs.len(), seconds, total_seconds: t0.elapsed().as_secs_f64(), evaluation })
+}
