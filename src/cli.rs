@@ -22,9 +22,10 @@ pub struct Cli {
     /// More detail on stderr (-vv for debug).
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
     pub verbose: u8,
-    /// libtorch CPU threads (0 = libtorch's default, one per core). The
-    /// cpu profile's small convolutions ran 7-10x faster on 1 thread than on
-    /// 2 on a 2-core machine shared with other work, hence the default.
+    /// libtorch CPU threads (0 = libtorch's default, one per core). 1 by
+    /// default: the cpu profile's small convolutions run faster on one thread
+    /// per process, and independent levels and shards use the other cores
+    /// (README, Performance).
     #[arg(long, global = true, default_value_t = 1, env = "SHAPESHIFTER_THREADS")]
     pub threads: i32,
     #[command(subcommand)]

@@ -9,7 +9,7 @@ use shapeshifter::learn::nn::{new_diffusion, new_upsampler};
 use shapeshifter::learn::sample::{level0_box, load_models, sample, SampleOptions};
 use shapeshifter::learn::sparse::SparseTensor;
 use shapeshifter::testing::synthetic::sphere_levels;
-use shapeshifter::learn::train::{state_path, train_level, train_level_with, TrainState};
+use shapeshifter::learn::train::{state_path, train_level, TrainJob, TrainState};
 
 /// libtorch's CPU kernels are bitwise reproducible only when one thread at a time
 /// runs them (concurrent callers share the intra-op pool and split work
@@ -59,11 +59,11 @@ fn training_lowers_the_loss_at_level_0_and_1() {
     let levels = exemplar();
     let config = tiny(&[]);
     let dir = tempfile::tempdir().unwrap();
-    let r0 = train_level(&levels, 0, &config, Device::Cpu, dir.path(), false, false).unwrap();
+    let r0 = train_level(&TrainJob::new(&levels, 0, &config, Device::Cpu, dir.path())).unwrap();
     assert_eq!(r0.diffusion_steps, 60);
     assert!(r0.finished && !r0.interrupted);
     assert!(r0.diffusion_loss_end < 0.8 * r0.diffusion_loss_start, "level 0: {r0:?}");
-    let r1 = train_level(&levels, 1, &config, Device::Cpu, dir.path(), false, false).unwrap();
+    let r1 = train_level(&TrainJob::new(&levels, 1, &config, Device::Cpu, dir.path())).unwrap();
     assert_eq!((r1.upsampler_steps, r1.diffusion_steps), (60, 60));
     assert!(r1.upsampler_loss_end < 0.8 * r1.upsampler_loss_start, "upsampler: {r1:?}");
     assert!(r1.diffusion_loss_end < 0.8 * r1.diffusion_loss_start, "level 1: {r1:?}");
@@ -82,7 +82,7 @@ fn training_lowers_the_loss_at_level_0_and_1() {
     assert!(leftovers.is_empty(), "{leftovers:?}");
     // same seed, same run
     let dir2 = tempfile::tempdir().unwrap();
-    let r0b = train_level(&levels, 0, &config, Device::Cpu, dir2.path(), false, false).unwrap();
+    let r0b = train_level(&TrainJob::new(&levels, 0, &config, Device::Cpu, dir2.path())).unwrap();
     assert_eq!(read_state(dir.path(), 0).diffusion_loss, read_state(dir2.path(), 0).diffusion_loss);
     assert_eq!(r0.diffusion_loss_end, r0b.diffusion_loss_end);
 }
@@ -121,18 +121,18 @@ fn resume_continues_the_step_count() {
     let short = tiny(&["train.upper_iterations=5", "train.upsampler_iterations=4", "train.checkpoint_minutes=0"]);
     // interrupted right after the first step
     let stop = AtomicBool::new(true);
-    let r = train_level_with(&levels, 1, &short, Device::Cpu, dir.path(), false, false, Some(&stop)).unwrap();
+    let r = train_level(&TrainJob { interrupt: Some(&stop), ..TrainJob::new(&levels, 1, &short, Device::Cpu, dir.path()) }).unwrap();
     assert!(r.interrupted && !r.finished);
     assert_eq!((r.upsampler_steps, r.diffusion_steps), (1, 0));
     assert_eq!(read_state(dir.path(), 1).upsampler_steps, 1);
-    let r = train_level(&levels, 1, &short, Device::Cpu, dir.path(), true, false).unwrap();
+    let r = train_level(&TrainJob { resume: true, ..TrainJob::new(&levels, 1, &short, Device::Cpu, dir.path()) }).unwrap();
     assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (3, 5));
     assert_eq!((r.upsampler_steps, r.diffusion_steps), (4, 5));
     assert!(r.finished);
     let first = read_state(dir.path(), 1);
     // more iterations: the count goes on, the history is kept
     let long = tiny(&["train.upper_iterations=8", "train.upsampler_iterations=4"]);
-    let r = train_level(&levels, 1, &long, Device::Cpu, dir.path(), true, false).unwrap();
+    let r = train_level(&TrainJob { resume: true, ..TrainJob::new(&levels, 1, &long, Device::Cpu, dir.path()) }).unwrap();
     assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (0, 3));
     assert_eq!(r.diffusion_steps, 8);
     let second = read_state(dir.path(), 1);
@@ -140,20 +140,20 @@ fn resume_continues_the_step_count() {
     assert_eq!(&second.diffusion_loss[..5], &first.diffusion_loss[..]);
     assert_eq!(second.upsampler_loss, first.upsampler_loss);
     // finished: resuming again does nothing
-    let r = train_level(&levels, 1, &long, Device::Cpu, dir.path(), true, false).unwrap();
+    let r = train_level(&TrainJob { resume: true, ..TrainJob::new(&levels, 1, &long, Device::Cpu, dir.path()) }).unwrap();
     assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (0, 0));
     // another model configuration refuses to resume
     let other = tiny(&["model.channels=4"]);
-    assert!(train_level(&levels, 1, &other, Device::Cpu, dir.path(), true, false).is_err());
+    assert!(train_level(&TrainJob { resume: true, ..TrainJob::new(&levels, 1, &other, Device::Cpu, dir.path()) }).is_err());
     // without resume it starts afresh
-    let r = train_level(&levels, 1, &short, Device::Cpu, dir.path(), false, false).unwrap();
+    let r = train_level(&TrainJob::new(&levels, 1, &short, Device::Cpu, dir.path())).unwrap();
     assert_eq!((r.upsampler_steps_now, r.diffusion_steps_now), (4, 5));
 }
 
 fn trained(dir: &std::path::Path, config: &Config) -> Vec<Level> {
     let levels = exemplar();
     for l in 0..2 {
-        train_level(&levels, l, config, Device::Cpu, dir, false, false).unwrap();
+        train_level(&TrainJob::new(&levels, l, config, Device::Cpu, dir)).unwrap();
     }
     levels
 }

@@ -364,7 +364,7 @@ pub fn train_stage(
         let t = Instant::now();
         // Resume whatever a previous (killed) run of this level left.
         let resume = train::state_path(models_dir, k).exists();
-        let r = train::train_level(levels, k, config, device, models_dir, resume, progress)?;
+        let r = train::train_level(&train::TrainJob { resume, progress, ..train::TrainJob::new(levels, k, config, device, models_dir) })?;
         log::info!(
             "train level {k}: {} + {} steps in {:.0} s, loss {:.4} -> {:.4}",
             r.upsampler_steps,

@@ -91,59 +91,46 @@ pub struct TrainReport {
     pub grid_voxels: usize,
 }
 
-/// Trains level `level` of the exemplar `levels` (coarsest first) into `out_dir`.
-/// With `resume`, continues from the checkpoints and state found there (their
-/// configuration must match up to iteration counts); without, starts afresh.
-pub fn train_level(
-    levels: &[Level],
-    level: usize,
-    config: &Config,
-    device: Device,
-    out_dir: &Path,
-    resume: bool,
-    progress: bool,
-) -> Result<TrainReport> {
-    train_level_with(levels, level, config, device, out_dir, resume, progress, None)
+/// One level's training: what to train, where, and how.
+pub struct TrainJob<'a> {
+    /// The exemplar's levels, coarsest first.
+    pub levels: &'a [Level],
+    /// The level to train.
+    pub level: usize,
+    pub config: &'a Config,
+    pub device: Device,
+    /// The models folder (checkpoints, state, loss plot).
+    pub out_dir: &'a Path,
+    /// Continue from the checkpoints and state found in `out_dir` (their
+    /// configuration must match up to iteration counts); else start afresh.
+    pub resume: bool,
+    /// Progress bars on stderr.
+    pub progress: bool,
+    /// Once set (e.g. by a Ctrl-C handler), training stops cleanly after the
+    /// current step: checkpoint, state and plot written.
+    pub interrupt: Option<&'a AtomicBool>,
 }
 
-/// [`train_level`] that stops cleanly (checkpoint, state, plot) after the current
-/// step once `interrupt` is set (e.g. by a Ctrl-C handler).
-#[allow(clippy::too_many_arguments)]
-pub fn train_level_with(
-    levels: &[Level],
-    level: usize,
-    config: &Config,
-    device: Device,
-    out_dir: &Path,
-    resume: bool,
-    progress: bool,
-    interrupt: Option<&AtomicBool>,
-) -> Result<TrainReport> {
-    if level >= levels.len() {
-        return Err(Error::Invalid(format!("level {level} asked for, the exemplar has {} levels", levels.len())));
+impl<'a> TrainJob<'a> {
+    /// Level `level` of `levels` into `out_dir`, afresh, quietly, not interruptible.
+    pub fn new(levels: &'a [Level], level: usize, config: &'a Config, device: Device, out_dir: &'a Path) -> Self {
+        TrainJob { levels, level, config, device, out_dir, resume: false, progress: false, interrupt: None }
     }
-    for (i, l) in levels.iter().enumerate() {
-        if l.is_empty() {
-            return Err(Error::Invalid(format!("exemplar level {i} has no voxels")));
-        }
-    }
-    if !out_dir.is_dir() {
-        return Err(Error::file(out_dir, "output folder does not exist"));
-    }
-    let t0 = Instant::now();
-    let tc = &config.train;
-    let digest = resume_digest(config);
+}
 
-    // ------------------------------------------------------------ state
+/// The state to start from: the one recorded in `out_dir` when resuming (it
+/// must be for this level and configuration), else a fresh one.
+fn starting_state(job: &TrainJob, digest: &str) -> Result<TrainState> {
+    let level = job.level;
     let mut state = TrainState {
         level,
-        config_digest: digest.clone(),
-        full_config_digest: config.digest(),
+        config_digest: digest.to_string(),
+        full_config_digest: job.config.digest(),
         note: "Adam moments are not checkpointed; they restart on resume".into(),
         ..Default::default()
     };
-    let sp = state_path(out_dir, level);
-    if resume && sp.exists() {
+    let sp = state_path(job.out_dir, level);
+    if job.resume && sp.exists() {
         let text = std::fs::read_to_string(&sp).map_err(|e| Error::file(&sp, e.to_string()))?;
         let old: TrainState =
             serde_json::from_str(&text).map_err(|e| Error::file(&sp, format!("bad training state: {e}")))?;
@@ -165,9 +152,31 @@ pub fn train_level_with(
         state.upsampler_loss.truncate(state.upsampler_steps);
         state.diffusion_loss.truncate(state.diffusion_steps);
         log::info!("level {level}: resuming at upsampler step {}, diffusion step {}", old.upsampler_steps, old.diffusion_steps);
-    } else if resume {
-        log::info!("level {level}: nothing to resume in {}, starting afresh", out_dir.display());
+    } else if job.resume {
+        log::info!("level {level}: nothing to resume in {}, starting afresh", job.out_dir.display());
     }
+    Ok(state)
+}
+
+/// Trains one level: the upsampler (levels >= 1), then the diffusion model.
+pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
+    let TrainJob { levels, level, config, device, out_dir, progress, interrupt, .. } = *job;
+    if level >= levels.len() {
+        return Err(Error::Invalid(format!("level {level} asked for, the exemplar has {} levels", levels.len())));
+    }
+    for (i, l) in levels.iter().enumerate() {
+        if l.is_empty() {
+            return Err(Error::Invalid(format!("exemplar level {i} has no voxels")));
+        }
+    }
+    if !out_dir.is_dir() {
+        return Err(Error::file(out_dir, "output folder does not exist"));
+    }
+    let t0 = Instant::now();
+    let tc = &config.train;
+    let digest = resume_digest(config);
+
+    let mut state = starting_state(job, &digest)?;
     let seconds_before = state.seconds;
 
     // ------------------------------------------------------------ models

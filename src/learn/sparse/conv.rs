@@ -1,0 +1,158 @@
+//! Submanifold convolution (gather, matmul) and the learnable layers.
+
+use super::*;
+
+/// The gather-matmul core: `feats [N, C]`, `map [N, K]` (missing = N), `w [K*C, C_out]`.
+pub(super) fn gather_conv(feats: &Tensor, map: &Tensor, w: &Tensor, rows_per_chunk: Option<i64>) -> Tensor {
+    let (n, c) = (feats.size()[0], feats.size()[1]);
+    let k3 = map.size()[1];
+    let co = w.size()[1];
+    let (kind, dev) = (feats.kind(), feats.device());
+    if n == 0 {
+        return Tensor::zeros([0, co], (kind, dev));
+    }
+    if k3 == 1 {
+        // 1x1x1: the map is the identity.
+        return feats.mm(w);
+    }
+    let padded = Tensor::cat(&[feats, &Tensor::zeros([1, c], (kind, dev))], 0);
+    let rows = rows_per_chunk.unwrap_or_else(|| chunk_rows(dev, k3 * c, kind)).max(1).min(n.max(1));
+    let needs_grad = grad_mode_enabled() && (feats.requires_grad() || w.requires_grad());
+    if !needs_grad {
+        let out = Tensor::empty([n, co], (kind, dev));
+        let buf = Tensor::empty([rows * k3, c], (kind, dev));
+        let mut s = 0;
+        while s < n {
+            let m = rows.min(n - s);
+            let idx = map.narrow(0, s, m).view([m * k3]);
+            let cols = buf.narrow(0, 0, m * k3);
+            let _ = padded.index_select_out(&cols, 0, &idx);
+            let _ = cols.view([m, k3 * c]).mm_out(&out.narrow(0, s, m), w);
+            s += m;
+        }
+        out
+    } else {
+        // One gather and one product: autograd turns the gather into a single
+        // scatter-add over all rows (blocks would each scatter into a full-size
+        // gradient, N^2 / block work in all).
+        let idx = map.view([n * k3]);
+        padded.index_select(0, &idx).view([n, k3 * c]).mm(w)
+    }
+}
+
+/// Functional submanifold convolution: `weight [k^3, C_in, C_out]`, optional bias
+/// `[C_out]`; output voxels = input voxels. `rows_per_chunk` overrides the im2col block.
+pub fn subm_conv3d(
+    x: &SparseTensor,
+    weight: &Tensor,
+    bias: Option<&Tensor>,
+    rows_per_chunk: Option<i64>,
+) -> Result<SparseTensor> {
+    let ws = weight.size();
+    let k3 = ws.first().copied().unwrap_or(0).max(0) as usize;
+    let k = (k3 as f64).cbrt().round() as usize;
+    if ws.len() != 3 || k * k * k != k3 || ws[1] != x.channels() {
+        return invalid(format!(
+            "weight of shape {ws:?} does not fit {} input channels ([k^3, C_in, C_out])",
+            x.channels()
+        ));
+    }
+    let map = x.grid.kernel_map(k)?.tensor(x.device());
+    let w = weight.reshape([ws[0] * ws[1], ws[2]]);
+    let out = gather_conv(&x.feats, &map, &w, rows_per_chunk);
+    x.with_feats(match bias {
+        Some(b) => out + b,
+        None => out,
+    })
+}
+
+/// Submanifold sparse 3-D convolution (output grid = input grid), kernel 1, 3 or 5
+/// (any odd size up to 7). Variables: `weight [k^3, C_in, C_out]`, `bias [C_out]`,
+/// initialised uniform in +-1/sqrt(C_in k^3) (PyTorch's conv default).
+#[derive(Debug)]
+pub struct SubmConv3d {
+    pub weight: Tensor,
+    pub bias: Option<Tensor>,
+    pub kernel_size: usize,
+    pub in_channels: i64,
+    pub out_channels: i64,
+}
+
+impl SubmConv3d {
+    pub fn new(vs: &nn::Path, in_channels: i64, out_channels: i64, kernel_size: usize, bias: bool) -> Result<Self> {
+        if kernel_size.is_multiple_of(2) || kernel_size > crate::learn::grid::MAX_KERNEL_SIZE {
+            return Err(GridError::KernelSize(kernel_size).into());
+        }
+        let k3 = kernel_size.pow(3) as i64;
+        let bound = 1.0 / ((in_channels * k3) as f64).sqrt();
+        let init = nn::Init::Uniform { lo: -bound, up: bound };
+        let weight = vs.f_var("weight", &[k3, in_channels, out_channels], init)?;
+        let bias = if bias { Some(vs.f_var("bias", &[out_channels], init)?) } else { None };
+        Ok(SubmConv3d { weight, bias, kernel_size, in_channels, out_channels })
+    }
+
+    pub fn forward(&self, x: &SparseTensor) -> Result<SparseTensor> {
+        subm_conv3d(x, &self.weight, self.bias.as_ref(), None)
+    }
+}
+
+/// Transposed convolution, kernel 2, stride 2: every coarse voxel feeds its 8
+/// children in the coarse grid's cached subdivision (`child = 2 * parent + (a,b,c)`,
+/// code `a*4 + b*2 + c`). Variables: `weight [C_in, 8, C_out]`, `bias [C_out]`,
+/// uniform in +-1/sqrt(C_in). Equals a dense `conv_transpose3d` with
+/// `W_dense[ci, co, a, b, c] = weight[ci, a*4+b*2+c, co]`.
+#[derive(Debug)]
+pub struct ConvTranspose2x {
+    pub weight: Tensor,
+    pub bias: Option<Tensor>,
+    pub in_channels: i64,
+    pub out_channels: i64,
+}
+
+impl ConvTranspose2x {
+    pub fn new(vs: &nn::Path, in_channels: i64, out_channels: i64, bias: bool) -> Result<Self> {
+        let bound = 1.0 / (in_channels as f64).sqrt();
+        let init = nn::Init::Uniform { lo: -bound, up: bound };
+        let weight = vs.f_var("weight", &[in_channels, 8, out_channels], init)?;
+        let bias = if bias { Some(vs.f_var("bias", &[out_channels], init)?) } else { None };
+        Ok(ConvTranspose2x { weight, bias, in_channels, out_channels })
+    }
+
+    /// Output on `x.grid.subdivide()?.fine` (the same `Arc` as [`upsample_trilinear`]).
+    pub fn forward(&self, x: &SparseTensor) -> Result<SparseTensor> {
+        if x.channels() != self.in_channels {
+            return invalid(format!("ConvTranspose2x expects {} channels, got {}", self.in_channels, x.channels()));
+        }
+        let sub = x.grid.subdivide()?;
+        let n = x.len() as i64;
+        // [N, C_in] x [C_in, 8 C_out] -> one row per (parent, child code) -> children.
+        let per_child = x
+            .feats
+            .mm(&self.weight.reshape([self.in_channels, 8 * self.out_channels]))
+            .view([n * 8, self.out_channels]);
+        let out = per_child.index_select(0, &sub.source_tensor(x.device()));
+        let out = match &self.bias {
+            Some(b) => out + b,
+            None => out,
+        };
+        SparseTensor::new(sub.fine.clone(), out)
+    }
+}
+
+/// Element-wise dropout of the features (active only when `train`).
+#[derive(Debug, Clone, Copy)]
+pub struct SparseDropout {
+    pub p: f64,
+}
+
+impl SparseDropout {
+    pub fn new(p: f64) -> Self {
+        SparseDropout { p }
+    }
+    pub fn forward_t(&self, x: &SparseTensor, train: bool) -> SparseTensor {
+        if !train || self.p == 0.0 {
+            return x.clone();
+        }
+        x.map(|f| f.dropout(self.p, train))
+    }
+}
