@@ -1,6 +1,7 @@
 //! Builds the one cxx bridge and its C++ shims, and gives the binary an rpath
 //! to libtorch. Reruns only when the bridge or the C++ changes, so Rust edits
-//! never recompile the (slow) OpenVDB/CGAL translation units.
+//! never recompile the (slow) OpenVDB/CGAL translation units. Also names the
+//! font file that the loss plots embed.
 
 use std::path::Path;
 
@@ -50,4 +51,25 @@ fn main() {
         println!("cargo:rustc-link-arg=-Wl,--push-state,--no-as-needed,-ltorch_cuda,--pop-state");
     }
     println!("cargo:rerun-if-env-changed=LIBTORCH");
+
+    plot_font();
+}
+
+/// The TrueType font the loss plots' text is drawn with (src/learn/train/plot.rs
+/// embeds its bytes, so the program needs no font, nor fontconfig, at run time):
+/// $SHAPESHIFTER_PLOT_FONT, else DejaVu Sans from the Debian package
+/// fonts-dejavu-core (installed by make setup).
+fn plot_font() {
+    const DEBIAN: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+    println!("cargo:rerun-if-env-changed=SHAPESHIFTER_PLOT_FONT");
+    let path = std::env::var("SHAPESHIFTER_PLOT_FONT").unwrap_or_else(|_| DEBIAN.to_string());
+    if !Path::new(&path).is_file() {
+        panic!(
+            "the loss plots' font {path} is missing: install the Debian package fonts-dejavu-core \
+             (make setup does: scripts/setup.sh), or set SHAPESHIFTER_PLOT_FONT to a .ttf file"
+        );
+    }
+    let path = Path::new(&path).canonicalize().expect("font path");
+    println!("cargo:rerun-if-changed={}", path.display());
+    println!("cargo:rustc-env=SHAPESHIFTER_PLOT_FONT={}", path.display());
 }

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One idempotent set-up for a fresh Debian 12 machine: Debian packages
-# (OpenVDB 10, OpenMesh 9, CGAL 5.5, ccache, ...) and libtorch 2.13.0 for
+# (OpenVDB 10, OpenMesh 9, CGAL 5.5, ccache, the DejaVu font that build.rs
+# embeds for the loss plots' text, ...) and libtorch 2.13.0 for
 # tch 0.26 from the PyPI torch wheel, cached OUTSIDE the work tree so that
 # clones and CI reuse it. A second run with everything present downloads
 # nothing and takes about a second.
@@ -10,7 +11,7 @@ cd "$(dirname "$0")/.."
 
 PACKAGES=(libopenvdb-dev libopenvdb-tools python3-openvdb libopenmesh-dev libcgal-dev
   libeigen3-dev libgmp-dev libmpfr-dev libtbb-dev libblosc-dev ccache pkg-config
-  python3-venv)
+  python3-venv fonts-dejavu-core)
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

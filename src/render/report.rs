@@ -57,7 +57,7 @@ h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em;border-bottom:1px solid #cc
 pre{background:#f6f6f6;padding:1em;overflow-x:auto;font-size:12px}\
 .sheet{max-width:100%}.grid{display:flex;flex-wrap:wrap;gap:12px}\
 figure{margin:0}figure img{width:256px;border:1px solid #ddd}figcaption{font-size:12px;text-align:center}\
-.loss{width:420px;border:1px solid #ddd}table{border-collapse:collapse}\
+.loss{width:640px;border:1px solid #ddd}table{border-collapse:collapse}\
 td,th{padding:2px 12px;text-align:right;border-bottom:1px solid #eee}td:first-child,th:first-child{text-align:left}";
 
 /// Checks that every image decoded; see the module comment.

@@ -45,6 +45,7 @@ use crate::learn::nn::{mse, new_diffusion, new_upsampler, DiffusionNet, LevelNet
 use crate::learn::sparse::{flood_blur, upsample_trilinear, SparseTensor};
 
 pub mod optim;
+pub mod plot;
 
 pub use crate::learn::checkpoint::{
     diffusion_checkpoint, diffusion_ema_checkpoint, loss_plot_path, read_state, state_path, upsampler_checkpoint,
@@ -332,7 +333,19 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     ckpt.save(&state, upsampler.as_ref(), Some(&diffusion))?;
     save_ema()?;
     let plot = loss_plot_path(out_dir, level);
-    write_atomically(&plot, |tmp| write_loss_plot(tmp, &state.upsampler_loss, &state.diffusion_loss))?;
+    // The learning rate of each step, drawn only when a schedule makes it vary.
+    let schedule = tc.lr_warmup_steps > 0 || tc.lr_final_ratio != 1.0;
+    let lrs = |n: usize, total: usize, base: f64| schedule.then(|| (0..n).map(|s| lr(s, total, base)).collect::<Vec<f64>>());
+    let up_lr = lrs(state.upsampler_loss.len(), tc.upsampler_iterations, tc.upsampler_lr);
+    let diff_lr = lrs(state.diffusion_loss.len(), diff_total, tc.lr);
+    write_atomically(&plot, |tmp| {
+        plot::write_loss_plot(
+            tmp,
+            level,
+            plot::PhaseCurve { loss: &state.upsampler_loss, lr: up_lr.as_deref() },
+            plot::PhaseCurve { loss: &state.diffusion_loss, lr: diff_lr.as_deref() },
+        )
+    })?;
 
     let (ds, de) = start_end(&state.diffusion_loss);
     let (us, ue) = start_end(&state.upsampler_loss);
@@ -543,83 +556,9 @@ fn start_end(v: &[f32]) -> (f64, f64) {
     (mean(&v[..k]), mean(&v[v.len() - k..]))
 }
 
-/// Draws the loss curves (log-scale y, steps of each phase spread over the width):
-/// upsampler blue, diffusion red, decade lines grey. No text.
-pub fn write_loss_plot(path: &Path, upsampler: &[f32], diffusion: &[f32]) -> Result<()> {
-    let (w, h) = (800u32, 400u32);
-    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
-    let all: Vec<f64> = upsampler.iter().chain(diffusion).map(|&x| x as f64).filter(|x| *x > 0.0 && x.is_finite()).collect();
-    if !all.is_empty() {
-        let lo = all.iter().cloned().fold(f64::INFINITY, f64::min).log10().floor();
-        let hi = all.iter().cloned().fold(f64::NEG_INFINITY, f64::max).log10().ceil().max(lo + 1.0);
-        let y_of = |v: f64| -> i64 {
-            let f = (v.max(1e-30).log10() - lo) / (hi - lo);
-            ((1.0 - f) * (h - 1) as f64).round() as i64
-        };
-        let mut d = lo;
-        while d <= hi {
-            let y = y_of(10f64.powf(d)).clamp(0, h as i64 - 1) as u32;
-            for x in 0..w {
-                img.put_pixel(x, y, image::Rgb([210, 210, 210]));
-            }
-            d += 1.0;
-        }
-        for (series, colour) in [(upsampler, [40u8, 80, 220]), (diffusion, [220u8, 40, 40])] {
-            if series.is_empty() {
-                continue;
-            }
-            // mean of the steps that fall into each pixel column
-            let mut prev: Option<(i64, i64)> = None;
-            for x in 0..w as usize {
-                let a = x * series.len() / w as usize;
-                let b = ((x + 1) * series.len() / w as usize).max(a + 1).min(series.len());
-                if a >= series.len() {
-                    break;
-                }
-                let m = series[a..b].iter().map(|&v| v as f64).sum::<f64>() / (b - a) as f64;
-                let p = (x as i64, y_of(m));
-                let q = prev.unwrap_or(p);
-                draw_line(&mut img, q, p, colour);
-                prev = Some(p);
-            }
-        }
-    }
-    img.save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, e.to_string()))
-}
-
-fn draw_line(img: &mut image::RgbImage, a: (i64, i64), b: (i64, i64), c: [u8; 3]) {
-    let n = (b.0 - a.0).abs().max((b.1 - a.1).abs()).max(1);
-    for i in 0..=n {
-        let x = a.0 + (b.0 - a.0) * i / n;
-        let y = a.1 + (b.1 - a.1) * i / n;
-        for dy in 0..2 {
-            let (px, py) = (x, y + dy);
-            if px >= 0 && py >= 0 && (px as u32) < img.width() && (py as u32) < img.height() {
-                img.put_pixel(px as u32, py as u32, image::Rgb(c));
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn loss_plot_draws_both_curves() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("loss.png");
-        let up: Vec<f32> = (0..50).map(|i| 1.0 / (1.0 + i as f32)).collect();
-        let diff: Vec<f32> = (0..3000).map(|i| 0.5 * (-(i as f32) / 1000.0).exp() + 0.01).collect();
-        write_loss_plot(&p, &up, &diff).unwrap();
-        let img = image::open(&p).unwrap().to_rgb8();
-        assert_eq!(img.dimensions(), (800, 400));
-        let count = |c: [u8; 3]| img.pixels().filter(|px| px.0 == c).count();
-        assert!(count([220, 40, 40]) > 800, "diffusion curve");
-        assert!(count([40, 80, 220]) > 800, "upsampler curve");
-        // empty histories still give an image
-        write_loss_plot(&p, &[], &[]).unwrap();
-    }
 
     #[test]
     fn resume_digest_ignores_iterations_only() {
