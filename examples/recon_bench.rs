@@ -36,39 +36,10 @@ fn shape(p: Vec3) -> f32 {
     blend + 0.015 * (9.0 * p.x).sin() * (9.0 * p.y).sin() * (9.0 * p.z).sin()
 }
 
+/// One point per voxel at `res`^3 over [-1, 1]^3, coloured by position.
 pub fn sample(res: i32) -> OrientedPoints {
     let vs = 2.0 / res as f32;
-    let e = vs * 1e-2;
-    let slabs: Vec<Vec<(Vec3, Vec3)>> = (0..res)
-        .into_par_iter()
-        .map(|i| {
-            let mut out = Vec::new();
-            for j in 0..res {
-                for k in 0..res {
-                    let c = Vec3::splat(-1.0) + (Vec3::new(i as f32, j as f32, k as f32) + 0.5) * vs;
-                    let d = sdf(c);
-                    if d.abs() >= 0.5 * vs {
-                        continue;
-                    }
-                    let g = Vec3::new(
-                        sdf(c + Vec3::X * e) - sdf(c - Vec3::X * e),
-                        sdf(c + Vec3::Y * e) - sdf(c - Vec3::Y * e),
-                        sdf(c + Vec3::Z * e) - sdf(c - Vec3::Z * e),
-                    )
-                    .normalize();
-                    out.push((c - g * d, g));
-                }
-            }
-            out
-        })
-        .collect();
-    let mut pts = OrientedPoints { spacing: vs, ..Default::default() };
-    for (p, n) in slabs.into_iter().flatten() {
-        pts.positions.push(p);
-        pts.normals.push(n);
-        pts.colours.push(p * 0.5 + 0.5);
-    }
-    pts
+    shapeshifter::testing::shapes::surface_points(sdf, Vec3::splat(-1.0), Vec3::ONE, vs, |p| p * 0.5 + 0.5)
 }
 
 /// User + system CPU seconds of this process.

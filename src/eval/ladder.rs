@@ -66,10 +66,6 @@ impl Rung {
             Rung::Untrained => "untrained",
         }
     }
-
-    pub fn from_name(name: &str) -> Option<Rung> {
-        Rung::ALL.into_iter().find(|r| r.name() == name)
-    }
 }
 
 /// How strongly each rung degrades.

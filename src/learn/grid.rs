@@ -394,10 +394,6 @@ impl SparseGrid {
     pub fn coord(&self, i: usize) -> IVec3 {
         unpack_key(self.keys[i]).1
     }
-    /// Batch item of voxel `i` (0 for an unbatched grid).
-    pub fn batch_index(&self, i: usize) -> u32 {
-        unpack_key(self.keys[i]).0
-    }
     pub fn coords(&self) -> Vec<IVec3> {
         self.keys.par_iter().map(|&k| unpack_key(k).1).collect()
     }
@@ -415,11 +411,6 @@ impl SparseGrid {
             })
             .collect();
         Tensor::from_slice(&flat).view([self.len() as i64, 3])
-    }
-    /// Batch indices as an `[N]` int64 CPU tensor.
-    pub fn batch_tensor(&self) -> Tensor {
-        let v: Vec<i64> = self.keys.par_iter().map(|&k| (k >> 48) as i64).collect();
-        Tensor::from_slice(&v)
     }
     /// Row range of each batch item (one range for an unbatched grid).
     pub fn batch_ranges(&self) -> Vec<Range<usize>> {

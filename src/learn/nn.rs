@@ -174,14 +174,6 @@ impl<N> LevelNet<N> {
             self.vs.save(tmp).map_err(|e| Error::file(path, format!("cannot save checkpoint: {e}")))
         })
     }
-
-    /// Copies of all variables, by name (to compare models in tests).
-    pub fn snapshot(&self) -> Vec<(String, Tensor)> {
-        let mut v: Vec<(String, Tensor)> =
-            self.vs.variables().into_iter().map(|(k, t)| (k, t.detach().copy())).collect();
-        v.sort_by(|a, b| a.0.cmp(&b.0));
-        v
-    }
 }
 
 /// A freshly initialised diffusion model for `level` (initialisation draws from

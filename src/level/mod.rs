@@ -105,16 +105,6 @@ impl Level {
     pub fn point_world(&self, i: usize) -> DVec3 {
         self.frame.to_world(self.point_normalised(i))
     }
-    /// Rows of 10 features in [`Channel`] order (colour kept in [0,1] here;
-    /// the network's `2*(2c-1)` scaling belongs to the learning modules).
-    pub fn feature_rows(&self) -> Vec<[f32; FEATURE_CHANNELS]> {
-        (0..self.len())
-            .map(|i| {
-                let (o, n, c) = (self.offsets[i], self.normals[i], self.colours[i]);
-                [o.x, o.y, o.z, n.x, n.y, n.z, c.x, c.y, c.z, self.mask[i]]
-            })
-            .collect()
-    }
     /// The first voxel with a NaN or infinite offset, normal, colour or mask.
     pub fn first_non_finite(&self) -> Option<usize> {
         (0..self.len()).find(|&i| {

@@ -2,50 +2,13 @@ use super::*;
 use glam::Vec3;
 use crate::io::poisson::{self, PoissonParams};
 
-/// One point per voxel of size `vs` that the surface crosses (|sdf| at the
-/// centre below vs/2), moved onto the surface, like the finest level of an
-/// encoded exemplar. `keep` filters the surface points.
-fn sample_sdf(
-    sdf: impl Fn(Vec3) -> f32,
-    lo: Vec3,
-    hi: Vec3,
-    vs: f32,
-    keep: impl Fn(Vec3) -> bool,
-) -> OrientedPoints {
-    let n = ((hi - lo) / vs).ceil().as_ivec3();
-    let mut pts = OrientedPoints { spacing: vs, ..Default::default() };
-    let e = vs * 1e-2;
-    for i in 0..n.x {
-        for j in 0..n.y {
-            for k in 0..n.z {
-                let c = lo + (Vec3::new(i as f32, j as f32, k as f32) + 0.5) * vs;
-                let d = sdf(c);
-                if d.abs() >= 0.5 * vs {
-                    continue;
-                }
-                let g = Vec3::new(
-                    sdf(c + Vec3::X * e) - sdf(c - Vec3::X * e),
-                    sdf(c + Vec3::Y * e) - sdf(c - Vec3::Y * e),
-                    sdf(c + Vec3::Z * e) - sdf(c - Vec3::Z * e),
-                )
-                .normalize();
-                let p = c - g * d;
-                if keep(p) {
-                    pts.positions.push(p);
-                    pts.normals.push(g);
-                    pts.colours.push(if p.x > 0.0 { Vec3::new(1.0, 0.0, 0.0) } else { Vec3::new(0.0, 0.0, 1.0) });
-                }
-            }
-        }
-    }
-    pts
-}
-
 const R: f32 = 0.5;
 const VS: f32 = 1.0 / 32.0;
 
 fn sphere() -> OrientedPoints {
-    sample_sdf(|p| p.length() - R, Vec3::splat(-0.7), Vec3::splat(0.7), VS, |_| true)
+    // Red where x > 0, blue elsewhere (the colour transfer is checked).
+    let red_blue = |p: Vec3| if p.x > 0.0 { Vec3::new(1.0, 0.0, 0.0) } else { Vec3::new(0.0, 0.0, 1.0) };
+    crate::testing::shapes::surface_points(|p| p.length() - R, Vec3::splat(-0.7), Vec3::splat(0.7), VS, red_blue)
 }
 
 /// A gently curved open patch: z = 0.1 sin(3x) cos(2y) over the disk x^2+y^2 < 0.5^2.

@@ -83,3 +83,53 @@ mod tests {
         }
     }
 }
+
+/// One point per voxel of size `vs` (world units) that the surface of `sdf`
+/// crosses (|sdf| at the voxel centre below vs/2) within the box [lo, hi],
+/// moved onto the surface along the numerical gradient, like the finest level
+/// of an encoded exemplar; colours from `colour` of the point. Slabs of x in
+/// parallel, points in (x, y, z) voxel order.
+pub fn surface_points(
+    sdf: impl Fn(glam::Vec3) -> f32 + Sync,
+    lo: glam::Vec3,
+    hi: glam::Vec3,
+    vs: f32,
+    colour: impl Fn(glam::Vec3) -> glam::Vec3,
+) -> crate::geom::points::OrientedPoints {
+    use glam::Vec3;
+    use rayon::prelude::*;
+    // A hair below the exact count, so that float rounding of (hi - lo) / vs
+    // never adds a slab outside the box.
+    let n = ((hi - lo) / vs - Vec3::splat(1e-4)).ceil().as_ivec3();
+    let e = vs * 1e-2;
+    let slabs: Vec<Vec<(Vec3, Vec3)>> = (0..n.x)
+        .into_par_iter()
+        .map(|i| {
+            let mut out = Vec::new();
+            for j in 0..n.y {
+                for k in 0..n.z {
+                    let c = lo + (Vec3::new(i as f32, j as f32, k as f32) + 0.5) * vs;
+                    let d = sdf(c);
+                    if d.abs() >= 0.5 * vs {
+                        continue;
+                    }
+                    let g = Vec3::new(
+                        sdf(c + Vec3::X * e) - sdf(c - Vec3::X * e),
+                        sdf(c + Vec3::Y * e) - sdf(c - Vec3::Y * e),
+                        sdf(c + Vec3::Z * e) - sdf(c - Vec3::Z * e),
+                    )
+                    .normalize();
+                    out.push((c - g * d, g));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut pts = crate::geom::points::OrientedPoints { spacing: vs, ..Default::default() };
+    for (p, g) in slabs.into_iter().flatten() {
+        pts.positions.push(p);
+        pts.normals.push(g);
+        pts.colours.push(colour(p));
+    }
+    pts
+}

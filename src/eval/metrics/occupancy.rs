@@ -116,10 +116,6 @@ impl OccupancyGrid {
     pub fn world_to_grid(&self, p: Vec3) -> DVec3 {
         (self.frame.to_normalised(p.as_dvec3()) - self.origin.as_dvec3()) / self.voxel as f64
     }
-
-    pub fn voxel_count(&self) -> u64 {
-        self.dims.iter().map(|&d| d as u64).product()
-    }
 }
 
 /// A bit-packed voxel set on an [`OccupancyGrid`]'s lattice.

@@ -220,6 +220,12 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     let diff_total = if level == 0 { tc.level0_iterations } else { tc.upper_iterations };
     let (mut diff_now, mut diff_rate) = (0usize, 0.0);
 
+    // Each level yields the batch of one diffusion step, drawn from the step's
+    // own generator (after libtorch's seed): level 0 the whole flooded box,
+    // `level0_batch` times at their own times; above, random crops of the
+    // flooded target around active fine voxels.
+    let diffusion_phase: &'static str;
+    let mut make_batch: Box<dyn FnMut(&mut Rng) -> Result<(SparseTensor, Vec<f32>)>>;
     if level == 0 {
         // -------------------------------------------------------- level 0
         let gt = SparseTensor::from_level(&levels[0], device)?;
@@ -228,27 +234,12 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         let copies: Vec<&SparseTensor> = (0..tc.level0_batch).map(|_| &target).collect();
         let x0 = SparseTensor::batch(&copies)?;
         let n = target.len();
-        let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
-        let net = &diffusion.net;
-        let phase = Phase { name: "level 0 diffusion", total: diff_total, progress };
-        let base = state.clone();
-        let d_ref = &diffusion;
-        let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
-            let mut rng = Rng::new(derive_seed(tc.seed, 0, Stream::DiffusionStep, step as u64));
-            tch::manual_seed(rng.next_u64() as i64);
-            let t_items: Vec<f32> = (0..tc.level0_batch).map(|_| rng.uniform() as f32).collect();
-            let t_rows: Vec<f32> = t_items.iter().flat_map(|&t| std::iter::repeat(t).take(n)).collect();
-            let t_rows = Tensor::from_slice(&t_rows).to_device(device);
-            opt.set_lr(lr(step, diff_total, tc.lr));
-            let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip)?;
-            if let Some(e) = ema.borrow_mut().as_mut() {
-                e.update();
-            }
-            Ok(loss)
-        }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
-        diff_now = r.0;
-        diff_rate = r.1;
-        interrupted |= r.2;
+        let batch = tc.level0_batch;
+        diffusion_phase = "level 0 diffusion";
+        make_batch = Box::new(move |rng| {
+            let t_items: Vec<f32> = (0..batch).map(|_| rng.uniform() as f32).collect();
+            Ok((x0.clone(), t_items.iter().flat_map(|&t| std::iter::repeat(t).take(n)).collect()))
+        });
     } else {
         // -------------------------------------------------------- levels >= 1
         let coarse = SparseTensor::from_level(&levels[level - 1], device)?;
@@ -288,42 +279,47 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
             up_rate = r.1;
             interrupted |= r.2;
         }
-        let u_ref: &LevelNet<Upsampler> = upsampler.as_ref().unwrap();
         if up_now > 0 || interrupted {
-            ckpt.save(&state, Some(u_ref), None)?;
+            ckpt.save(&state, Some(u), None)?;
         }
-        // diffusion: random crops
-        if !interrupted {
-            let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
-            let net = &diffusion.net;
-            let phase = Phase { name: "diffusion", total: diff_total, progress };
-            let base = state.clone();
-            let d_ref = &diffusion;
-            let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
-                let mut rng = Rng::new(derive_seed(tc.seed, level as u64, Stream::DiffusionStep, step as u64));
-                tch::manual_seed(rng.next_u64() as i64);
-                let mut crops = Vec::with_capacity(tc.upper_batch);
-                let mut t_rows = Vec::new();
-                for _ in 0..tc.upper_batch {
-                    let c = centres[rng.below(centres.len())];
-                    let t = (rng.uniform() * tc.upper_t_max) as f32;
-                    let crop = target.crop(c, 0, tc.crop)?;
-                    t_rows.extend(std::iter::repeat(t).take(crop.len()));
-                    crops.push(crop);
-                }
-                let x0 = SparseTensor::batch(&crops.iter().collect::<Vec<_>>())?;
-                let t_rows = Tensor::from_slice(&t_rows).to_device(device);
-                opt.set_lr(lr(step, diff_total, tc.lr));
-                let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip)?;
-                if let Some(e) = ema.borrow_mut().as_mut() {
-                    e.update();
-                }
-                Ok(loss)
-            }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
-            diff_now = r.0;
-            diff_rate = r.1;
-            interrupted |= r.2;
-        }
+        let (crop, batch, t_max) = (tc.crop, tc.upper_batch, tc.upper_t_max);
+        diffusion_phase = "diffusion";
+        make_batch = Box::new(move |rng| {
+            let mut crops = Vec::with_capacity(batch);
+            let mut t_rows = Vec::new();
+            for _ in 0..batch {
+                let c = centres[rng.below(centres.len())];
+                let t = (rng.uniform() * t_max) as f32;
+                let item = target.crop(c, 0, crop)?;
+                t_rows.extend(std::iter::repeat(t).take(item.len()));
+                crops.push(item);
+            }
+            Ok((SparseTensor::batch(&crops.iter().collect::<Vec<_>>())?, t_rows))
+        });
+    }
+
+    // ------------------------------------------------------------ diffusion
+    if !interrupted {
+        let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
+        let net = &diffusion.net;
+        let phase = Phase { name: diffusion_phase, total: diff_total, progress };
+        let base = state.clone();
+        let d_ref = &diffusion;
+        let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
+            let mut rng = Rng::new(derive_seed(tc.seed, level as u64, Stream::DiffusionStep, step as u64));
+            tch::manual_seed(rng.next_u64() as i64);
+            let (x0, t_rows) = make_batch(&mut rng)?;
+            let t_rows = Tensor::from_slice(&t_rows).to_device(device);
+            opt.set_lr(lr(step, diff_total, tc.lr));
+            let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip)?;
+            if let Some(e) = ema.borrow_mut().as_mut() {
+                e.update();
+            }
+            Ok(loss)
+        }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
+        diff_now = r.0;
+        diff_rate = r.1;
+        interrupted |= r.2;
     }
 
     // ------------------------------------------------------------ final save
