@@ -794,7 +794,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     config_digest: config.digest(),
                     exemplar_open: manifest.open_surface,
                 };
-                pipeline::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview, config.output.write_options())?;
+                dataset::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview, config.output.write_options())?;
             }
             println!("{} variants -> {}", variants.len(), output.display());
             Ok(ExitCode::SUCCESS)
@@ -852,7 +852,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 mesh::save(&m, &target, true).map_err(|e| e.to_string())?;
                 if let Some(png) = &preview {
-                    let img = render::render_mesh(&m, &pipeline::preview_options()).map_err(|e| fail(&e))?;
+                    let img = render::render_mesh(&m, &render::preview_options()).map_err(|e| fail(&e))?;
                     render::save_png(&img, png).map_err(|e| e.to_string())?;
                 }
                 let summary = MeshedSummary {

@@ -217,3 +217,31 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
     }
     Ok(report)
 }
+
+/// Writes one variant's levels (and previews) into its folder.
+pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, previews: bool, write: WriteOptions) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    // What an earlier sampling left (levels that are now empty, a mesh of
+    // other levels) must not be read as part of this variant.
+    for e in std::fs::read_dir(dir).map_err(|e| Error::file(dir, e.to_string()))?.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let stale = (name.starts_with("level_") && (name.ends_with(".vdb") || name.ends_with(".png")))
+            || name.starts_with("mesh.")
+            || name.starts_with("stage_");
+        if stale {
+            std::fs::remove_file(e.path()).map_err(|err| Error::file(&e.path(), err.to_string()))?;
+        }
+    }
+    for level in levels {
+        if level.is_empty() {
+            log::warn!("{}: level {} is empty after pruning", dir.display(), level.index);
+            continue;
+        }
+        vdb::write_level(&dir.join(level_file_name(level.index)), level, provenance, write)?;
+        if previews {
+            let img = render::render_level(level, &render::preview_options())?;
+            render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
+        }
+    }
+    Ok(())
+}

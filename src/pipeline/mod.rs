@@ -77,11 +77,6 @@ pub fn encode_options(config: &Config) -> EncodeOptions {
     }
 }
 
-/// Preview options for the pipeline's pictures.
-pub fn preview_options() -> RenderOptions {
-    RenderOptions { width: 640, height: 640, ..Default::default() }
-}
-
 /// Encodes the mesh file `mesh_path` into `dir` (the `encode` command, one
 /// file of a batch): level files, previews if asked, manifest.json.
 pub fn encode_file(
@@ -115,7 +110,7 @@ pub fn encode_stage(mesh: &Mesh, source: &str, source_sha: &str, config: &Config
     let t = Instant::now();
     let options = encode_options(config);
     let (levels, stats) = encode::encode(mesh, &options)?;
-    dataset::write(dir, mesh, source, source_sha, &levels, &options, &stats, Some(&preview_options()), config.output.write_options())?;
+    dataset::write(dir, mesh, source, source_sha, &levels, &options, &stats, Some(&render::preview_options()), config.output.write_options())?;
     log::info!(
         "encode: {} levels in {:.1} s ({})",
         levels.len(),
@@ -385,34 +380,6 @@ pub fn variant_dir(variants_dir: &Path, i: usize) -> PathBuf {
     variants_dir.join(format!("variant_{i:03}"))
 }
 
-/// Writes one variant's levels (and previews) into its folder.
-pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, previews: bool, write: WriteOptions) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
-    // What an earlier sampling left (levels that are now empty, a mesh of
-    // other levels) must not be read as part of this variant.
-    for e in std::fs::read_dir(dir).map_err(|e| Error::file(dir, e.to_string()))?.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        let stale = (name.starts_with("level_") && (name.ends_with(".vdb") || name.ends_with(".png")))
-            || name.starts_with("mesh.")
-            || name.starts_with("stage_");
-        if stale {
-            std::fs::remove_file(e.path()).map_err(|err| Error::file(&e.path(), err.to_string()))?;
-        }
-    }
-    for level in levels {
-        if level.is_empty() {
-            log::warn!("{}: level {} is empty after pruning", dir.display(), level.index);
-            continue;
-        }
-        vdb::write_level(&dir.join(dataset::level_file_name(level.index)), level, provenance, write)?;
-        if previews {
-            let img = render::render_level(level, &preview_options())?;
-            render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
-        }
-    }
-    Ok(())
-}
-
 /// Samples variants `options.first .. first + n` into
 /// `variants_dir/variant_XXX/` (XXX = the variant's index). Each variant
 /// folder is stamped on its own, so shards written by different jobs fill one
@@ -462,7 +429,7 @@ pub fn sample_stage(
         let one = SampleOptions { first: i, n: 1, ..options.clone() };
         let v = sample::sample(&models, exemplar_levels, &one, None)?;
         let dir = variant_dir(variants_dir, i);
-        write_variant(&dir, &v[0], &provenance, previews, config.output.write_options())?;
+        dataset::write_variant(&dir, &v[0], &provenance, previews, config.output.write_options())?;
         mark_done(&dir, "sample", &digest(&[&common, &i.to_string()]), tv.elapsed().as_secs_f64())?;
     }
     log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
@@ -561,7 +528,7 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settin
                 if settings.glb {
                     crate::io::mesh::save(&mesh, &glb, true)?;
                 }
-                let img = render::render_mesh(&mesh, &preview_options())?;
+                let img = render::render_mesh(&mesh, &render::preview_options())?;
                 render::save_png(&img, &dir.join("mesh.png"))?;
                 mark_done(dir, "mesh", &d, t.elapsed().as_secs_f64())?;
                 done += 1;
@@ -772,7 +739,7 @@ pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> 
     record_config(&paths.root, config)?;
     if demo {
         crate::io::mesh::save(&mesh, &paths.root.join("exemplar.ply"), true)?;
-        render::save_png(&render::render_mesh(&mesh, &preview_options())?, &paths.root.join("exemplar.png"))?;
+        render::save_png(&render::render_mesh(&mesh, &render::preview_options())?, &paths.root.join("exemplar.png"))?;
     }
     let levels = encode_stage(&mesh, &name, &sha, config, &paths.exemplar())?;
     Ok((name, levels))

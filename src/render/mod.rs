@@ -274,6 +274,11 @@ pub fn screen_fraction(p: Vec3, opts: &RenderOptions) -> Vec2 {
     Vec2::new(x / opts.width.max(1) as f32, y / opts.height.max(1) as f32)
 }
 
+/// The size of the previews written beside level files and meshes.
+pub fn preview_options() -> RenderOptions {
+    RenderOptions { width: 640, height: 640, ..Default::default() }
+}
+
 /// Writes `img` as a PNG at `path`, atomically ([`crate::util::fs::write_file`]):
 /// encoded in memory first, so an encoding failure writes nothing.
 pub fn save_png(img: &RgbImage, path: &Path) -> crate::Result<()> {
