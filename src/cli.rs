@@ -232,10 +232,10 @@ pub enum Command {
         /// Decimate to at most this many triangles (0: keep every triangle).
         #[arg(long, default_value_t = 0)]
         faces: usize,
-        /// Meshing method [default: APSS when the exemplar was an open
-        /// surface, Poisson otherwise].
-        #[arg(long, value_enum)]
-        method: Option<Method>,
+        /// Meshing method; auto: APSS when the exemplar was an open surface,
+        /// Poisson otherwise.
+        #[arg(long, value_enum, ignore_case = true, default_value_t = MethodChoice::Auto)]
+        method: MethodChoice,
         /// Contouring grid cells along the longest axis of the points' box
         /// [default: Poisson 256, APSS 512].
         #[arg(long, conflicts_with = "depth")]
@@ -479,6 +479,24 @@ pub struct BatchArgs {
     /// Print what happened to every input as JSON on stdout (for scripts).
     #[arg(long)]
     pub json: bool,
+}
+
+/// `mesh --method`: a meshing method, or the one the exemplar calls for.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum MethodChoice {
+    Auto,
+    Poisson,
+    Apss,
+}
+
+impl MethodChoice {
+    fn method(self) -> Option<Method> {
+        match self {
+            MethodChoice::Auto => None,
+            MethodChoice::Poisson => Some(Method::Poisson),
+            MethodChoice::Apss => Some(Method::Apss),
+        }
+    }
 }
 
 /// How previews look.
@@ -845,7 +863,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", input.display());
                 let (level, provenance) = vdb::read_level(input).map_err(|e| e.to_string())?;
                 let (m, used) =
-                    pipeline::mesh_level(&level, provenance.exemplar_open, method, resolution).map_err(|e| fail(&e))?;
+                    pipeline::mesh_level(&level, provenance.exemplar_open, method.method(), resolution).map_err(|e| fail(&e))?;
                 let m = pipeline::light_mesh(m, faces).map_err(|e| fail(&e))?;
                 if several {
                     std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;

@@ -143,11 +143,11 @@ pub struct TrainConfig {
     pub grad_clip: f64,
     /// Levels >= 1 use t in [0, upper_t_max].
     pub upper_t_max: f64,
-    /// Removed: the forward process is x_t = alpha x0 + sigma eps (the
-    /// released code's). Configurations recorded with `mixing = "code"` still
-    /// read; "paper" is refused (README, Configuration).
-    #[serde(default, skip_serializing, rename = "mixing")]
-    pub legacy_mixing: Option<String>,
+    /// The forward process: only the released code's, x_t = alpha x0 + sigma
+    /// eps (README, Configuration). Kept as a recorded setting so that the
+    /// digests of existing runs stay valid.
+    #[serde(default)]
+    pub mixing: Mixing,
     /// Learning-rate schedule of every phase: linear warm-up over this many
     /// steps, then cosine decay to `lr_final_ratio` times the rate at the
     /// phase's last step (0 and 1.0: a constant rate, the paper's).
@@ -162,6 +162,17 @@ pub struct TrainConfig {
     pub ema_decay: f64,
     pub checkpoint_minutes: f64,
     pub seed: u64,
+}
+
+/// What the diffusion model is trained to undo. The paper's mixing of x0
+/// with the upsampled coarse level ("paper") was trained but never sampled,
+/// and is gone; a configuration that asks for it is refused.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mixing {
+    /// x_t = alpha(t) x0 + sigma(t) eps, as the released code.
+    #[default]
+    Code,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -273,11 +284,6 @@ impl Config {
             return Err(Error::Invalid(
                 "encode resolutions must satisfy coarsest <= finest <= sampling".into(),
             ));
-        }
-        if let Some(m) = self.train.legacy_mixing.as_deref().filter(|m| *m != "code") {
-            return Err(Error::Invalid(format!(
-                "train.mixing = '{m}' is no longer supported (remove the line: the forward process is the released code's)"
-            )));
         }
         let m = &self.model;
         for k in [m.level0_first_kernel, m.upper_first_kernel] {
@@ -394,6 +400,18 @@ mod tests {
         assert_eq!(b.sample.sampler, crate::learn::schedule::Sampler::Ddpm);
         assert_eq!(a.with_overrides(&[]).unwrap(), a);
         assert!(a.with_overrides(&["sample.sampler=euler".into()]).is_err());
+    }
+
+    /// Digests are recorded in every stamp and level file: a change of the
+    /// configuration's text (a field renamed, retyped or dropped) makes every
+    /// existing run retrain. The cpu profile's digest as 67f8725 recorded it.
+    #[test]
+    fn digests_of_existing_runs_stay_valid() {
+        assert_eq!(Config::load("cpu", &[]).unwrap().digest(), "ec8270f7727c41f7");
+        let recorded = Config::load("cpu", &["train.mixing=\"code\"".into()]).unwrap();
+        assert_eq!(recorded.digest(), "ec8270f7727c41f7");
+        let err = Config::load("cpu", &["train.mixing=\"paper\"".into()]).unwrap_err().to_string();
+        assert!(err.contains("paper"), "{err}");
     }
 
     #[test]

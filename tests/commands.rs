@@ -55,7 +55,8 @@ fn encode_bad_inputs_leave_nothing() {
     assert!(!out.exists(), "no output folder for a failed encode");
     let ply = small_tower_ply(dir.path());
     let o = shapeshifter(&["encode", ply.to_str().unwrap(), "-o", out.to_str().unwrap(), "--finest", "100"]);
-    assert_clean_failure(&o, "", "power of two");
+    // An option error names the option, not a file.
+    assert_clean_failure(&o, "finest_resolution = 100", "power of two");
     assert!(!out.exists());
 }
 

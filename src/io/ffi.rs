@@ -136,7 +136,7 @@ pub mod bridge {
         pub seconds_solve: f64,
         /// The grid evaluation of `poisson_grid`.
         pub seconds_mesh: f64,
-        /// Extraction and orientation of the triangles.
+        /// Surface nets on the sampled grid (filled in on the Rust side, wall clock).
         pub seconds_output: f64,
         /// Grid corners evaluated by `poisson_grid`.
         pub grid_corners: u64,

@@ -144,14 +144,9 @@ impl Mesh {
             .collect();
         let total: f32 = areas.iter().sum();
         let mut out = Vec::with_capacity(n);
-        // xorshift64: the same samples on every run.
-        let mut state = 0x2545F4914F6CDD1Du64;
-        let mut rnd = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        // The same samples on every run.
+        let mut rng = crate::util::rng::Rng::new(0x2545_F491_4F6C_DD1D);
+        let mut rnd = move || rng.uniform() as f32;
         for (t, area) in self.triangles.iter().zip(&areas) {
             let k = (area / total * n as f32).round() as usize;
             let [a, b, c] = t.map(|i| self.positions[i as usize]);
@@ -201,7 +196,7 @@ pub fn load(path: &Path) -> Result<Mesh> {
         ));
     }
     if ext == "obj" {
-        // OBJ is read in Rust (src/obj.rs says why: OpenMesh's reader aborts
+        // OBJ is read in Rust (src/io/obj.rs says why: OpenMesh's reader aborts
         // the process on some malformed face lines).
         let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
@@ -221,7 +216,7 @@ pub fn load(path: &Path) -> Result<Mesh> {
         return from_bridge(path, data);
     }
     // PLY, OFF and STL go through OpenMesh, after the sizes their headers
-    // declare were checked against the file's length (src/mesh_check.rs).
+    // declare were checked against the file's length (src/io/mesh_check.rs).
     let declared = crate::io::mesh_check::check(path, &ext)?;
     let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
     let data = bridge::read_mesh(path_str).map_err(|e| Error::file(path, e.what()))?;

@@ -219,9 +219,12 @@ pub fn summarise(path: &Path) -> Result<Vec<GridSummary>> {
 
 /// OpenVDB's message for a file it could not read, with what it usually
 /// means: a cut-off file makes OpenVDB read garbage as the next grid's type
-/// name and report "Grid type is not registered".
+/// name and report "Grid type is not registered" (a whole file with a grid
+/// type this build of OpenVDB lacks says the same).
 fn read_failure(what: &str) -> String {
-    if what.contains("not registered") || what.contains("end of file") || what.contains("EOF") {
+    if what.contains("not registered") {
+        format!("truncated or damaged level file, or a grid type OpenVDB 10 does not know (OpenVDB: {what})")
+    } else if what.contains("end of file") || what.contains("EOF") {
         format!("truncated or damaged level file (OpenVDB: {what})")
     } else {
         what.to_string()

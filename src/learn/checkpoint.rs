@@ -32,7 +32,7 @@ pub fn loss_plot_path(dir: &Path, level: usize) -> PathBuf {
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct TrainState {
     pub level: usize,
-    /// [`resume_digest`] of the configuration that trained it.
+    /// [`crate::learn::train::resume_digest`] of the configuration that trained it.
     pub config_digest: String,
     /// Full digest of that configuration (for the record).
     pub full_config_digest: String,

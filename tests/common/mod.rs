@@ -6,19 +6,20 @@ use std::process::{Command, Output};
 
 /// `../shared/data` beside the project, if present; where it is absent (a
 /// user's fresh checkout has none) the test is recorded as skipped ([`skip`]).
+/// (`../../shared/data` too: a worktree one folder deeper.)
 pub fn shared_data(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        skip(&format!("{} is absent (../shared/data is not beside this checkout)", p.display()));
-        None
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let found = ["../shared/data", "../../shared/data"].iter().map(|d| root.join(d).join(rel)).find(|p| p.exists());
+    if found.is_none() {
+        skip(&format!("../shared/data/{rel} is absent (../shared/data is not beside this checkout)"));
     }
+    found
 }
 
-/// Records that the calling test cannot run here (the caller then returns):
-/// a line on stderr and in `target/test-skips.log`, which `make test` counts
-/// and prints at the end, so a skip never passes as "ok" unseen. With
+/// Records that the calling test (or a part of it) cannot run here: a line
+/// on stderr and in the skip log ($SHAPESHIFTER_SKIP_LOG, which `make test`
+/// sets, clears and prints at the end; else `skips.log` in cargo's
+/// test scratch folder), so a skip never passes as "ok" unseen. With
 /// SHAPESHIFTER_NO_SKIPS set (CI, where ../shared/data and every client are
 /// present) a skip is a failure.
 pub fn skip(reason: &str) {
@@ -27,10 +28,19 @@ pub fn skip(reason: &str) {
         panic!("{test} would skip, and SHAPESHIFTER_NO_SKIPS is set: {reason}");
     }
     eprintln!("SKIPPED {test}: {reason}");
-    let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-skips.log");
-    if let Ok(mut f) = std::fs::OpenOptions::new().create(true).append(true).open(log) {
+    let log = std::env::var_os("SHAPESHIFTER_SKIP_LOG")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_TARGET_TMPDIR")).join("skips.log"));
+    if let Some(dir) = log.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    let line = format!("{test}: {reason}\n");
+    let written = std::fs::OpenOptions::new().create(true).append(true).open(&log).and_then(|mut f| {
         use std::io::Write;
-        let _ = writeln!(f, "{test}: {reason}");
+        f.write_all(line.as_bytes())
+    });
+    if let Err(e) = written {
+        eprintln!("warning: cannot record the skip in {}: {e}", log.display());
     }
 }
 
@@ -58,7 +68,7 @@ pub fn assert_clean_failure(o: &Output, file: &str, problem: &str) {
     assert!(o.status.code().is_some(), "killed by a signal (C++ exception?): {err}");
     let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
     assert_eq!(lines.len(), 1, "expected one error line, got: {err}");
-    assert!(lines[0].contains(file), "error does not name {file}: {}", lines[0]);
+    assert!(!file.is_empty() && lines[0].contains(file), "error does not name '{file}': {}", lines[0]);
     assert!(!problem.trim().is_empty(), "say which problem the error must name");
     assert!(lines[0].to_lowercase().contains(&problem.to_lowercase()), "error does not say '{problem}': {}", lines[0]);
 }
