@@ -22,8 +22,8 @@ struct Args {
     #[arg(long, value_name = "N", default_value_t = 5)]
     runs: usize,
     /// How children pool into parents.
-    #[arg(long, default_value = "qem", value_parser = ["qem", "average"])]
-    pooling: String,
+    #[arg(long, value_enum, default_value_t = Pooling::Qem)]
+    pooling: Pooling,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -57,10 +57,7 @@ fn main() {
     let default = Path::new("../shared/data/towerruins/towerruins.obj");
     let path = args.mesh.as_deref().unwrap_or(default);
     let runs = args.runs;
-    let pooling = match args.pooling.as_str() {
-        "average" => Pooling::Average,
-        _ => Pooling::Qem,
-    };
+    let pooling = args.pooling;
     let mesh = match mesh::load(path) {
         Ok(m) => m,
         Err(_) if args.mesh.is_none() && !default.exists() => {

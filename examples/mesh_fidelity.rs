@@ -3,7 +3,7 @@
 //! Hausdorff distance (both surfaces sampled uniformly by area), reported in
 //! voxels of the finest level.
 //!
-//! Usage: mesh_fidelity [poisson|apss|auto] --mesh MESH [--finest N] [--sampling N]
+//! Usage: mesh_fidelity [poisson|apss] --mesh MESH [--finest N] [--sampling N]
 //!
 //! Or, to score meshes made elsewhere (ours and Open3D's in
 //! scripts/poisson-vs-open3d.sh) with the same code:
@@ -26,9 +26,9 @@ use shapeshifter::{io::mesh, eval::metrics, pipeline, recon};
 struct Args {
     #[command(subcommand)]
     command: Option<Command>,
-    /// Meshing method; auto: the one `shapeshifter mesh` chooses.
-    #[arg(default_value = "auto", value_parser = ["auto", "poisson", "apss"])]
-    method: String,
+    /// Meshing method; none: the one `shapeshifter mesh` chooses.
+    #[arg(value_enum)]
+    method: Option<recon::Method>,
     /// The exemplar mesh.
     #[arg(long, value_name = "PATH", required = true)]
     mesh: Option<PathBuf>,
@@ -87,10 +87,7 @@ fn main() -> anyhow::Result<()> {
         return compare(mesh, level, candidates);
     }
     let path = args.mesh.as_deref().expect("--mesh is required");
-    let method: Option<recon::Method> = match args.method.as_str() {
-        "auto" => None,
-        m => Some(<recon::Method as clap::ValueEnum>::from_str(m, true).map_err(|e| anyhow::anyhow!(e))?),
-    };
+    let method = args.method;
     let (finest, sampling) = (args.finest, args.sampling);
     let exemplar = mesh::load(path)?;
     let options = EncodeOptions { finest_resolution: finest, sampling_resolution: sampling, ..Default::default() };

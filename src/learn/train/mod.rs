@@ -39,7 +39,7 @@ use crate::config::Config;
 use crate::util::rng::Rng;
 use crate::learn::schedule::Schedule;
 use crate::error::{Error, Result};
-use crate::util::fs::{write_atomically, write_file};
+use crate::util::fs::write_file;
 use crate::level::{Channel, Level};
 use crate::learn::nn::{mse, new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{flood_blur, upsample_trilinear, SparseTensor};
@@ -334,14 +334,12 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     let lrs = |n: usize, total: usize, base: f64| schedule.then(|| (0..n).map(|s| lr(s, total, base)).collect::<Vec<f64>>());
     let up_lr = lrs(state.upsampler_loss.len(), tc.upsampler_iterations, tc.upsampler_lr);
     let diff_lr = lrs(state.diffusion_loss.len(), diff_total, tc.lr);
-    write_atomically(&plot, |tmp| {
-        plot::write_loss_plot(
-            tmp,
-            level,
-            plot::PhaseCurve { loss: &state.upsampler_loss, lr: up_lr.as_deref() },
-            plot::PhaseCurve { loss: &state.diffusion_loss, lr: diff_lr.as_deref() },
-        )
-    })?;
+    plot::write_loss_plot(
+        &plot,
+        level,
+        plot::PhaseCurve { loss: &state.upsampler_loss, lr: up_lr.as_deref() },
+        plot::PhaseCurve { loss: &state.diffusion_loss, lr: diff_lr.as_deref() },
+    )?;
 
     let (ds, de) = start_end(&state.diffusion_loss);
     let (us, ue) = start_end(&state.upsampler_loss);

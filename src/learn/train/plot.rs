@@ -41,13 +41,15 @@ pub struct PhaseCurve<'a> {
     pub lr: Option<&'a [f64]>,
 }
 
-/// Writes the loss plot of level `level` to `path` (PNG, [`WIDTH`] x [`HEIGHT`]).
-/// Either phase may be empty (level 0 has no upsampler).
+/// Writes the loss plot of level `level` to `path` (PNG, [`WIDTH`] x [`HEIGHT`],
+/// atomically). Either phase may be empty (level 0 has no upsampler).
 pub fn write_loss_plot(path: &Path, level: usize, upsampler: PhaseCurve, diffusion: PhaseCurve) -> Result<()> {
     let mut buf = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
     draw(&mut buf, level, &upsampler, &diffusion).map_err(|e| Error::file(path, format!("cannot draw the loss plot: {e}")))?;
     let img = image::RgbImage::from_raw(WIDTH, HEIGHT, buf).expect("buffer of WIDTH x HEIGHT RGB pixels");
-    img.save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, e.to_string()))
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png).map_err(|e| Error::file(path, e.to_string()))?;
+    crate::util::fs::write_file(path, png.into_inner())
 }
 
 type DrawResult<T> = std::result::Result<T, Box<dyn StdError>>;
