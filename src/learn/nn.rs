@@ -105,6 +105,19 @@ impl DiffusionNet {
         self.out.forward(&h).map_err(Error::from)
     }
 
+    /// Floating-point operations of one forward pass per voxel: 2 k^3 C_in
+    /// C_out for every convolution (the im2col GEMM, absent neighbours
+    /// included, as computed), biases and activations left out. A training
+    /// step (forward, input and weight gradients) costs about three times this.
+    pub fn flops_per_voxel(&self) -> f64 {
+        self.convs
+            .iter()
+            .chain(&self.head)
+            .chain(std::iter::once(&self.out))
+            .map(|c| 2.0 * c.kernel_size.pow(3) as f64 * c.in_channels as f64 * c.out_channels as f64)
+            .sum()
+    }
+
     /// [`Self::forward_t`] with one time for all voxels.
     pub fn forward_at(&self, x: &SparseTensor, t: f64, train: bool) -> Result<SparseTensor> {
         let tt = Tensor::from(t as f32).to_device(x.device());

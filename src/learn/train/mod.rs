@@ -395,8 +395,9 @@ pub fn flooded_target(coarse: &SparseTensor, fine: &SparseTensor) -> Result<Spar
     })
 }
 
-/// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`).
-fn diffusion_step(
+/// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`):
+/// noise, forward, MSE to x0, backward, clipped step; returns the loss.
+pub fn diffusion_step(
     net: &DiffusionNet,
     opt: &mut tch::nn::Optimizer,
     x0: &SparseTensor,

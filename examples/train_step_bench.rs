@@ -1,0 +1,124 @@
+//! Efficiency of a whole diffusion training step (forward, backward, Adam),
+//! per level of the demo exemplar under a profile: the step's arithmetic (3 x
+//! the forward convolutions' GEMM work, `DiffusionNet::flops_per_voxel`) per
+//! second, as a fraction of a dense GEMM of the same shape measured in the
+//! same run (`[rows, 27 C] x [27 C, C]`), and that GEMM in bf16 (the lever
+//! AVX512-BF16 CPUs offer). Batches are built as training builds
+//! them: level 0 the flooded box `level0_batch` times, above `upper_batch`
+//! crops of `crop`^3 around random active voxels.
+//!
+//! `cargo run --release --example train_step_bench [-- --profile cpu --steps 10 --threads 1 --set model.channels=64]`
+
+use std::time::Instant;
+
+use clap::Parser;
+use glam::IVec3;
+use shapeshifter::config::Config;
+use shapeshifter::encode::{encode, exemplar};
+use shapeshifter::learn::nn::new_diffusion;
+use shapeshifter::learn::sparse::{flood_blur, SparseTensor};
+use shapeshifter::learn::train::{diffusion_step, flooded_target};
+use shapeshifter::util::rng::Rng;
+use tch::nn::OptimizerConfig;
+use tch::{Device, Kind, Tensor};
+
+#[derive(Parser)]
+struct Args {
+    /// Profile (shipped name or TOML file).
+    #[arg(long, default_value = "cpu")]
+    profile: String,
+    /// Overrides, as `run --set`.
+    #[arg(long = "set")]
+    overrides: Vec<String>,
+    /// Timed steps per level (after 2 warm-up steps); the median is reported.
+    #[arg(long, default_value_t = 10)]
+    steps: usize,
+    /// libtorch threads.
+    #[arg(long, default_value_t = 1)]
+    threads: i32,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// Seconds of one `[rows, k] x [k, c]` matmul of `kind`, median of 5.
+fn gemm_seconds(rows: i64, k: i64, c: i64, kind: Kind) -> f64 {
+    let a = Tensor::randn([rows, k], (kind, Device::Cpu));
+    let b = Tensor::randn([k, c], (kind, Device::Cpu));
+    let _ = a.mm(&b);
+    median((0..5).map(|_| {
+        let t = Instant::now();
+        let _ = a.mm(&b);
+        t.elapsed().as_secs_f64()
+    }).collect())
+}
+
+fn main() -> anyhow::Result<()> {
+    shapeshifter::util::alloc::tune_allocator();
+    let args = Args::parse();
+    tch::set_num_threads(args.threads);
+    let config = Config::load(&args.profile, &args.overrides)?;
+    let (levels, _) = encode(&exemplar::ruined_tower(&Default::default()), &shapeshifter::pipeline::encode_options(&config))?;
+    let tc = &config.train;
+    println!(
+        "profile {}, {} channels, {} libtorch thread(s), median of {} steps; GFLOP/s = 3 x forward GEMM work / step time",
+        config.name, config.model.channels, args.threads, args.steps
+    );
+    println!("level  res  rows/step  step s   GFLOP/s  GEMM GFLOP/s  fraction  bf16 GEMM GF/s");
+    for (l, level) in levels.iter().enumerate() {
+        let fine = SparseTensor::from_level(level, Device::Cpu)?;
+        let mut rng = Rng::new(7);
+        let mut batch: Box<dyn FnMut(&mut Rng) -> anyhow::Result<(SparseTensor, Vec<f32>)>> = if l == 0 {
+            let target = flood_blur(&fine)?;
+            let x0 = SparseTensor::batch(&(0..tc.level0_batch).map(|_| &target).collect::<Vec<_>>())?;
+            let n = target.len();
+            let b = tc.level0_batch;
+            Box::new(move |rng| Ok((x0.clone(), (0..b).flat_map(|_| std::iter::repeat(rng.uniform() as f32).take(n)).collect())))
+        } else {
+            let coarse = SparseTensor::from_level(&levels[l - 1], Device::Cpu)?;
+            let target = flooded_target(&coarse, &fine)?;
+            let centres: Vec<IVec3> =
+                level.coords.iter().zip(&level.mask).filter(|(_, &m)| m > 0.0).map(|(c, _)| *c).collect();
+            let (b, crop, t_max) = (tc.upper_batch, tc.crop, tc.upper_t_max);
+            Box::new(move |rng| {
+                let mut items = Vec::new();
+                let mut t_rows = Vec::new();
+                for _ in 0..b {
+                    let item = target.crop(centres[rng.below(centres.len())], 0, crop)?;
+                    t_rows.extend(std::iter::repeat((rng.uniform() * t_max) as f32).take(item.len()));
+                    items.push(item);
+                }
+                Ok((SparseTensor::batch(&items.iter().collect::<Vec<_>>())?, t_rows))
+            })
+        };
+        tch::manual_seed(1);
+        let net = new_diffusion(&config.model, l, Device::Cpu)?;
+        let mut opt = tch::nn::Adam::default().build(&net.vs, tc.lr)?;
+        let (mut seconds, mut rows) = (Vec::new(), Vec::new());
+        for step in 0..args.steps + 2 {
+            let (x0, t) = batch(&mut rng)?;
+            let t = Tensor::from_slice(&t);
+            let start = Instant::now();
+            diffusion_step(&net.net, &mut opt, &x0, &t, tc.grad_clip)?;
+            if step >= 2 {
+                seconds.push(start.elapsed().as_secs_f64());
+                rows.push(x0.len() as f64);
+            }
+        }
+        let (secs, n) = (median(seconds), median(rows));
+        let gflops = 3.0 * net.net.flops_per_voxel() * n / secs / 1e9;
+        let c = config.model.channels;
+        let work = 2.0 * n * 27.0 * (c * c) as f64 / 1e9;
+        let gemm_gflops = work / gemm_seconds(n as i64, 27 * c, c, Kind::Float);
+        let bf16_gflops = work / gemm_seconds(n as i64, 27 * c, c, Kind::BFloat16);
+        println!(
+            "{l:>5} {:>4} {:>10.0} {secs:>7.3} {gflops:>9.1} {gemm_gflops:>13.1} {:>9.2} {bf16_gflops:>14.1}",
+            level.resolution,
+            n,
+            gflops / gemm_gflops
+        );
+    }
+    Ok(())
+}
