@@ -62,9 +62,10 @@ fn main() -> anyhow::Result<()> {
     let config = Config::load(&args.profile, &args.overrides)?;
     let (levels, _) = encode(&exemplar::ruined_tower(&Default::default()), &shapeshifter::pipeline::encode_options(&config))?;
     let tc = &config.train;
+    let _bf16 = shapeshifter::learn::sparse::bf16_compute_scope(tc.bf16);
     println!(
-        "profile {}, {} channels, {} libtorch thread(s), median of {} steps; GFLOP/s = 3 x forward GEMM work / step time",
-        config.name, config.model.channels, args.threads, args.steps
+        "profile {}, {} channels, {}, {} libtorch thread(s), median of {} steps; GFLOP/s = 3 x forward GEMM work / step time",
+        config.name, config.model.channels, if tc.bf16 { "bf16 GEMMs" } else { "f32" }, args.threads, args.steps
     );
     println!("level  res  rows/step  step s   GFLOP/s  GEMM GFLOP/s  fraction  bf16 GEMM GF/s");
     for (l, level) in levels.iter().enumerate() {

@@ -160,6 +160,11 @@ pub struct TrainConfig {
     /// (0: none, sampling uses the last weights).
     #[serde(default)]
     pub ema_decay: f64,
+    /// Mixed precision: the diffusion model's convolutions multiply in bf16
+    /// during training (weights, optimiser and activations stay f32). Off:
+    /// not written, so the digests of existing runs stay valid.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub bf16: bool,
     pub checkpoint_minutes: f64,
     pub seed: u64,
 }

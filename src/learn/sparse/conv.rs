@@ -2,6 +2,35 @@
 
 use super::*;
 
+thread_local! {
+    static BF16_COMPUTE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether submanifold convolutions on this thread multiply in bf16.
+pub fn bf16_compute() -> bool {
+    BF16_COMPUTE.with(|c| c.get())
+}
+
+/// Makes submanifold convolutions on this thread multiply in bf16 (f32
+/// features and weights cast for the GEMM, the result cast back) until the
+/// returned guard drops. Per thread: libtorch runs an op on its caller's
+/// thread, and parallel tests must not see each other's setting.
+pub fn bf16_compute_scope(on: bool) -> Bf16Scope {
+    let previous = BF16_COMPUTE.with(|c| c.replace(on));
+    Bf16Scope { previous }
+}
+
+/// Restores the previous setting of [`bf16_compute_scope`] when dropped.
+pub struct Bf16Scope {
+    previous: bool,
+}
+
+impl Drop for Bf16Scope {
+    fn drop(&mut self) {
+        BF16_COMPUTE.with(|c| c.set(self.previous));
+    }
+}
+
 /// The gather-matmul core: `feats [N, C]`, `map [N, K]` (missing = N), `w [K*C, C_out]`.
 pub(super) fn gather_conv(feats: &Tensor, map: &Tensor, w: &Tensor, rows_per_chunk: Option<i64>) -> Tensor {
     let (n, c) = (feats.size()[0], feats.size()[1]);
@@ -59,7 +88,14 @@ pub fn subm_conv3d(
     }
     let map = x.grid.kernel_map(k)?.tensor(x.device());
     let w = weight.reshape([ws[0] * ws[1], ws[2]]);
-    let out = gather_conv(&x.feats, &map, &w, rows_per_chunk);
+    let out = if bf16_compute() && x.feats.kind() == Kind::Float {
+        // Mixed precision: the GEMM in bf16, features and weights kept in
+        // f32 (the casts are differentiable: gradients reach the f32 weights).
+        gather_conv(&x.feats.to_kind(Kind::BFloat16), &map, &w.to_kind(Kind::BFloat16), rows_per_chunk)
+            .to_kind(Kind::Float)
+    } else {
+        gather_conv(&x.feats, &map, &w, rows_per_chunk)
+    };
     x.with_feats(match bias {
         Some(b) => out + b,
         None => out,

@@ -106,6 +106,35 @@ mod tests {
         (Arc::new(SparseGrid::from_coords(32, &coords).unwrap()), Tensor::from_slice(&pos))
     }
 
+    /// bf16 GEMMs: f32 in and out, values within bf16's rounding of the f32
+    /// result, gradients on the f32 weights, and the setting confined to its
+    /// scope and thread.
+    #[test]
+    fn bf16_compute_is_close_and_trains_f32_weights() {
+        tch::manual_seed(3);
+        let (grid, _) = box_subset(6, IVec3::ZERO, |i| i % 3 != 0);
+        let vs = VarStore::new(Device::Cpu);
+        let conv = SubmConv3d::new(&vs.root(), 16, 16, 3, true).unwrap();
+        let x = SparseTensor::new(grid.clone(), Tensor::randn([grid.len() as i64, 16], (Kind::Float, Device::Cpu))).unwrap();
+        let exact = conv.forward(&x).unwrap().feats;
+        assert!(!bf16_compute());
+        let mixed = {
+            let _scope = bf16_compute_scope(true);
+            assert!(bf16_compute());
+            assert!(!std::thread::spawn(bf16_compute).join().unwrap(), "another thread stays f32");
+            let y = conv.forward(&x).unwrap().feats;
+            y.sum(Kind::Float).backward();
+            y
+        };
+        assert!(!bf16_compute(), "the scope restores f32");
+        assert_eq!(mixed.kind(), Kind::Float);
+        let e = rel_err(&mixed.detach(), &exact.detach());
+        assert!(e > 0.0 && e < 2e-2, "bf16 result off by {e:e} (or not bf16 at all)");
+        let g = conv.weight.grad();
+        assert_eq!(g.kind(), Kind::Float);
+        assert!(g.abs().sum(Kind::Float).double_value(&[]) > 0.0, "no gradient reached the f32 weights");
+    }
+
     fn check_conv_vs_dense(k: usize, d: i32, keep: impl Fn(usize) -> bool, chunk: Option<i64>) {
         tch::manual_seed(k as i64 + 10 * d as i64);
         let (cin, cout) = (3i64, 4i64);

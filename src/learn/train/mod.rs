@@ -175,6 +175,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     }
     let t0 = Instant::now();
     let tc = &config.train;
+    let _bf16 = crate::learn::sparse::bf16_compute_scope(tc.bf16);
     let digest = resume_digest(config);
 
     let mut state = starting_state(job, &digest)?;
