@@ -3,7 +3,7 @@
 //! the forward convolutions' GEMM work, `DiffusionNet::flops_per_voxel`) per
 //! second, as a fraction of a dense GEMM of the same shape measured in the
 //! same run (`[rows, 27 C] x [27 C, C]`), and that GEMM in bf16 (the lever
-//! AVX512-BF16 CPUs offer). Batches are built as training builds
+//! AVX512-BF16 CPUs offer). Batches come from training's own `TrainingData`:
 //! them: level 0 the flooded box `level0_batch` times, above `upper_batch`
 //! crops of `crop`^3 around random active voxels.
 //!
@@ -12,12 +12,10 @@
 use std::time::Instant;
 
 use clap::Parser;
-use glam::IVec3;
 use shapeshifter::config::Config;
 use shapeshifter::encode::{encode, exemplar};
 use shapeshifter::learn::nn::new_diffusion;
-use shapeshifter::learn::sparse::{flood_blur, SparseTensor};
-use shapeshifter::learn::train::{diffusion_step, flooded_target};
+use shapeshifter::learn::train::{diffusion_step, TrainingData};
 use shapeshifter::util::rng::Rng;
 use tch::nn::OptimizerConfig;
 use tch::{Device, Kind, Tensor};
@@ -69,31 +67,9 @@ fn main() -> anyhow::Result<()> {
     );
     println!("level  res  rows/step  step s   GFLOP/s  GEMM GFLOP/s  fraction  bf16 GEMM GF/s");
     for (l, level) in levels.iter().enumerate() {
-        let fine = SparseTensor::from_level(level, Device::Cpu)?;
         let mut rng = Rng::new(7);
-        let mut batch: Box<dyn FnMut(&mut Rng) -> anyhow::Result<(SparseTensor, Vec<f32>)>> = if l == 0 {
-            let target = flood_blur(&fine)?;
-            let x0 = SparseTensor::batch(&(0..tc.level0_batch).map(|_| &target).collect::<Vec<_>>())?;
-            let n = target.len();
-            let b = tc.level0_batch;
-            Box::new(move |rng| Ok((x0.clone(), (0..b).flat_map(|_| std::iter::repeat(rng.uniform() as f32).take(n)).collect())))
-        } else {
-            let coarse = SparseTensor::from_level(&levels[l - 1], Device::Cpu)?;
-            let target = flooded_target(&coarse, &fine)?;
-            let centres: Vec<IVec3> =
-                level.coords.iter().zip(&level.mask).filter(|(_, &m)| m > 0.0).map(|(c, _)| *c).collect();
-            let (b, crop, t_max) = (tc.upper_batch, tc.crop, tc.upper_t_max);
-            Box::new(move |rng| {
-                let mut items = Vec::new();
-                let mut t_rows = Vec::new();
-                for _ in 0..b {
-                    let item = target.crop(centres[rng.below(centres.len())], 0, crop)?;
-                    t_rows.extend(std::iter::repeat((rng.uniform() * t_max) as f32).take(item.len()));
-                    items.push(item);
-                }
-                Ok((SparseTensor::batch(&items.iter().collect::<Vec<_>>())?, t_rows))
-            })
-        };
+        // The batches training draws (shapeshifter::learn::train::TrainingData).
+        let mut batch = TrainingData::new(&levels, l, Device::Cpu)?.diffusion_batches(tc)?;
         tch::manual_seed(1);
         let net = new_diffusion(&config.model, l, Device::Cpu)?;
         let mut opt = tch::nn::Adam::default().build(&net.vs, tc.lr)?;

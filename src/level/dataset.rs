@@ -55,13 +55,15 @@ pub fn file_sha256(path: &Path) -> Result<String> {
 
 /// SHA-256 (hex) of a mesh's geometry and colours, for generated meshes.
 pub fn mesh_sha256(mesh: &Mesh) -> String {
-    let mut bytes = Vec::with_capacity(12 * mesh.positions.len() * 2 + 12 * mesh.triangles.len());
-    bytes.extend(mesh.positions.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes));
-    bytes.extend(mesh.triangles.iter().flatten().flat_map(|v| v.to_le_bytes()));
+    use sha2::{Digest, Sha256};
+    // Streamed: a mesh of millions of triangles is not copied to be hashed.
+    let mut h = Sha256::new();
+    mesh.positions.iter().flat_map(|p| p.to_array()).for_each(|v| h.update(v.to_le_bytes()));
+    mesh.triangles.iter().flatten().for_each(|v| h.update(v.to_le_bytes()));
     if let crate::io::mesh::MeshColours::PerVertex(c) = &mesh.colours {
-        bytes.extend(c.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes));
+        c.iter().flat_map(|p| p.to_array()).for_each(|v| h.update(v.to_le_bytes()));
     }
-    crate::util::digest::sha256(&bytes)
+    crate::util::digest::hex(&h.finalize())
 }
 
 

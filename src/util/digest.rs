@@ -14,7 +14,12 @@ fn sha256_hex(parts: &[&[u8]], separated: bool, bytes: usize) -> String {
             h.update([0u8]);
         }
     }
-    h.finalize().iter().take(bytes).map(|b| format!("{b:02x}")).collect()
+    hex(&h.finalize()[..bytes])
+}
+
+/// Lower-case hex of `bytes` (a finished digest).
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Full SHA-256 of `bytes`, 64 hex digits.

@@ -35,7 +35,7 @@ use std::time::Instant;
 use glam::IVec3;
 use tch::{nn::OptimizerConfig, Device, Kind, Tensor};
 
-use crate::config::Config;
+use crate::config::{Config, TrainConfig};
 use crate::util::rng::Rng;
 use crate::learn::schedule::Schedule;
 use crate::error::{Error, Result};
@@ -216,47 +216,17 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     let mut interrupted = false;
     let stop = || interrupt.map(|f| f.load(Ordering::Relaxed)).unwrap_or(false);
     let (mut up_now, mut up_rate) = (0usize, 0.0);
-    let grid_voxels;
 
     let diff_total = if level == 0 { tc.level0_iterations } else { tc.upper_iterations };
     let (mut diff_now, mut diff_rate) = (0usize, 0.0);
 
-    // Each level yields the batch of one diffusion step, drawn from the step's
-    // own generator (after libtorch's seed): level 0 the whole flooded box,
-    // `level0_batch` times at their own times; above, random crops of the
-    // flooded target around active fine voxels.
-    let diffusion_phase: &'static str;
-    let mut make_batch: Box<dyn FnMut(&mut Rng) -> Result<(SparseTensor, Vec<f32>)>>;
-    if level == 0 {
-        // -------------------------------------------------------- level 0
-        let gt = SparseTensor::from_level(&levels[0], device)?;
-        let target = flood_blur(&gt)?;
-        grid_voxels = target.len();
-        let copies: Vec<&SparseTensor> = (0..tc.level0_batch).map(|_| &target).collect();
-        let x0 = SparseTensor::batch(&copies)?;
-        let n = target.len();
-        let batch = tc.level0_batch;
-        diffusion_phase = "level 0 diffusion";
-        make_batch = Box::new(move |rng| {
-            let t_items: Vec<f32> = (0..batch).map(|_| rng.uniform() as f32).collect();
-            Ok((x0.clone(), t_items.iter().flat_map(|&t| std::iter::repeat(t).take(n)).collect()))
-        });
-    } else {
+    let data = TrainingData::new(levels, level, device)?;
+    let grid_voxels = data.target.len();
+    let mut make_batch = data.diffusion_batches(tc)?;
+    let diffusion_phase = if level == 0 { "level 0 diffusion" } else { "diffusion" };
+    if let Some(coarse) = &data.coarse {
         // -------------------------------------------------------- levels >= 1
-        let coarse = SparseTensor::from_level(&levels[level - 1], device)?;
-        let fine = SparseTensor::from_level(&levels[level], device)?;
-        let target = flooded_target(&coarse, &fine)?;
-        grid_voxels = target.len();
-        let centres: Vec<IVec3> = levels[level]
-            .coords
-            .iter()
-            .zip(&levels[level].mask)
-            .filter(|(_, &m)| m > 0.0)
-            .map(|(c, _)| *c)
-            .collect();
-        if centres.is_empty() {
-            return Err(Error::Invalid(format!("exemplar level {level} has no active voxel")));
-        }
+        let target = &data.target;
         let u: &LevelNet<Upsampler> = upsampler.as_ref().expect("upsampler exists above level 0");
         // upsampler: whole grid
         {
@@ -268,7 +238,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
             let r = phase.run(&mut state.upsampler_steps, &mut state.upsampler_loss, &stop, |step| {
                 tch::manual_seed(derive_seed(tc.seed, level as u64, Stream::UpsamplerStep, step as u64) as i64);
                 opt.set_lr(lr(step, tc.upsampler_iterations, tc.upsampler_lr));
-                let pred = net.forward_t(&coarse, true)?;
+                let pred = net.forward_t(coarse, true)?;
                 let loss = mse(&pred.feats, &target_f);
                 opt.zero_grad();
                 loss.backward();
@@ -283,20 +253,6 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         if up_now > 0 || interrupted {
             ckpt.save(&state, Some(u), None)?;
         }
-        let (crop, batch, t_max) = (tc.crop, tc.upper_batch, tc.upper_t_max);
-        diffusion_phase = "diffusion";
-        make_batch = Box::new(move |rng| {
-            let mut crops = Vec::with_capacity(batch);
-            let mut t_rows = Vec::new();
-            for _ in 0..batch {
-                let c = centres[rng.below(centres.len())];
-                let t = (rng.uniform() * t_max) as f32;
-                let item = target.crop(c, 0, crop)?;
-                t_rows.extend(std::iter::repeat(t).take(item.len()));
-                crops.push(item);
-            }
-            Ok((SparseTensor::batch(&crops.iter().collect::<Vec<_>>())?, t_rows))
-        });
     }
 
     // ------------------------------------------------------------ diffusion
@@ -394,6 +350,68 @@ pub fn flooded_target(coarse: &SparseTensor, fine: &SparseTensor) -> Result<Spar
         let feats = feats.index_copy(0, &Tensor::from_slice(&dst).to_device(dev), &true_feats);
         x_up.with_feats(feats).map_err(Error::from)
     })
+}
+
+/// One diffusion training batch: the noised items' clean features and the
+/// time of every row. Drawn from the step's own generator.
+pub type BatchMaker = Box<dyn FnMut(&mut Rng) -> Result<(SparseTensor, Vec<f32>)>>;
+
+/// What one level trains on, built once from the exemplar's levels.
+pub struct TrainingData {
+    /// The upsampler's input, the coarse level (None at level 0).
+    pub coarse: Option<SparseTensor>,
+    /// Level 0: the flooded box ([`flood_blur`]); above: the flooded
+    /// subdivision of the coarse level ([`flooded_target`]).
+    pub target: SparseTensor,
+    /// Levels >= 1: the active fine voxels that crops are centred on.
+    centres: Vec<IVec3>,
+}
+
+impl TrainingData {
+    pub fn new(levels: &[Level], level: usize, device: Device) -> Result<Self> {
+        let fine = SparseTensor::from_level(&levels[level], device)?;
+        if level == 0 {
+            return Ok(TrainingData { coarse: None, target: flood_blur(&fine)?, centres: Vec::new() });
+        }
+        let coarse = SparseTensor::from_level(&levels[level - 1], device)?;
+        let target = flooded_target(&coarse, &fine)?;
+        let l = &levels[level];
+        let centres: Vec<IVec3> = l.coords.iter().zip(&l.mask).filter(|(_, &m)| m > 0.0).map(|(c, _)| *c).collect();
+        if centres.is_empty() {
+            return Err(Error::Invalid(format!("exemplar level {level} has no active voxel")));
+        }
+        Ok(TrainingData { coarse: Some(coarse), target, centres })
+    }
+
+    /// The diffusion batches of this level: level 0 the whole flooded box
+    /// `level0_batch` times, each copy at its own time in [0, 1]; above,
+    /// `upper_batch` crops of `crop`^3 around random active fine voxels, each at
+    /// its own time in [0, upper_t_max].
+    pub fn diffusion_batches(&self, tc: &TrainConfig) -> Result<BatchMaker> {
+        let target = self.target.clone();
+        if self.coarse.is_none() {
+            let (n, batch) = (target.len(), tc.level0_batch);
+            let x0 = SparseTensor::batch(&vec![&target; batch])?;
+            return Ok(Box::new(move |rng| {
+                let t_items: Vec<f32> = (0..batch).map(|_| rng.uniform() as f32).collect();
+                Ok((x0.clone(), t_items.iter().flat_map(|&t| std::iter::repeat(t).take(n)).collect()))
+            }));
+        }
+        let centres = self.centres.clone();
+        let (crop, batch, t_max) = (tc.crop, tc.upper_batch, tc.upper_t_max);
+        Ok(Box::new(move |rng| {
+            let mut crops = Vec::with_capacity(batch);
+            let mut t_rows = Vec::new();
+            for _ in 0..batch {
+                let c = centres[rng.below(centres.len())];
+                let t = (rng.uniform() * t_max) as f32;
+                let item = target.crop(c, 0, crop)?;
+                t_rows.extend(std::iter::repeat(t).take(item.len()));
+                crops.push(item);
+            }
+            Ok((SparseTensor::batch(&crops.iter().collect::<Vec<_>>())?, t_rows))
+        }))
+    }
 }
 
 /// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`):
