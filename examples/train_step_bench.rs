@@ -4,7 +4,7 @@
 //! second, as a fraction of a dense GEMM of the same shape measured in the
 //! same run (`[rows, 27 C] x [27 C, C]`), and that GEMM in bf16 (the lever
 //! AVX512-BF16 CPUs offer). Batches come from training's own `TrainingData`:
-//! them: level 0 the flooded box `level0_batch` times, above `upper_batch`
+//! level 0 the flooded box `level0_batch` times, above `upper_batch`
 //! crops of `crop`^3 around random active voxels.
 //!
 //! `cargo run --release --example train_step_bench [-- --profile cpu --steps 10 --threads 1 --set model.channels=64]`
