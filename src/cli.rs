@@ -800,9 +800,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             options.extent = ext;
             options.stop_level = stop_level;
             let from_level = from.as_deref().map(vdb::read_level).transpose()?.map(|(l, _)| l);
-            let last = stop_level.map_or(levels.len(), |k| k + 1);
-            let m = sample::load_models(&models, &config, last, device)?;
-            let variants = sample::sample(&m, &levels, &options, from_level)?;
+            let m = sample::load_models(&models, &config, pipeline::models_needed(&config, &levels, stop_level), device)?;
+            let variants = pipeline::sample_variants(&m, &levels, &options, from_level)?;
             std::fs::create_dir_all(&output)?;
             pipeline::record_config(&output, &config)?;
             for (i, v) in variants.iter().enumerate() {

@@ -34,6 +34,11 @@ pub struct Config {
     /// existed, hence the default (every triangle, PLY only).
     #[serde(default)]
     pub mesh: MeshConfig,
+    /// The finest levels made by detail transfer instead of a trained network
+    /// (README, Configuration). Not written when off, so the digests of
+    /// configurations without it stay valid.
+    #[serde(default, skip_serializing_if = "crate::transfer::TransferConfig::is_off")]
+    pub transfer: crate::transfer::TransferConfig,
 }
 
 /// Files that leave the program.
@@ -218,6 +223,11 @@ impl Config {
     }
 
     fn from_table(mut table: toml::Table, overrides: &[String]) -> Result<Config> {
+        // A section that is not written when off can still be set.
+        if !table.contains_key("transfer") {
+            let off = toml::Value::try_from(crate::transfer::TransferConfig::default()).expect("serialises");
+            table.insert("transfer".into(), off);
+        }
         for o in overrides {
             apply_override(&mut table, o)?;
         }
@@ -260,6 +270,8 @@ impl Config {
                 toml::to_string(&self.train),
                 toml::to_string(&self.sample),
                 toml::to_string(&self.output),
+                // Detail transfer, where on (absent before it existed).
+                if self.transfer.is_off() { Ok(String::new()) } else { toml::to_string(&self.transfer) },
             ]
             .into_iter()
             .collect::<Result<Vec<_>, _>>()
@@ -279,7 +291,21 @@ impl Config {
         (self.encode.finest_resolution / self.encode.coarsest_resolution).trailing_zeros() as usize + 1
     }
 
+    /// Number of levels with a trained diffusion model: all but the finest
+    /// `transfer.levels`, which detail transfer makes.
+    pub fn trained_levels(&self) -> usize {
+        self.levels().saturating_sub(self.transfer.levels)
+    }
+
     fn validate(&self) -> Result<()> {
+        self.transfer.validate().map_err(Error::Invalid)?;
+        if self.transfer.levels >= self.levels() {
+            return Err(Error::Invalid(format!(
+                "transfer.levels = {} leaves no level for the networks (the configuration has {} levels; level 0 is always sampled)",
+                self.transfer.levels,
+                self.levels()
+            )));
+        }
         let e = &self.encode;
         let pow2 = |v: u32| v >= 4 && v.is_power_of_two();
         if !(pow2(e.sampling_resolution) && pow2(e.coarsest_resolution) && pow2(e.finest_resolution)) {

@@ -21,6 +21,8 @@ pub enum Error {
     #[error(transparent)]
     Recon(#[from] crate::recon::ReconError),
     #[error(transparent)]
+    Transfer(#[from] crate::transfer::TransferError),
+    #[error(transparent)]
     Shape(#[from] crate::eval::metrics::DegenerateShape),
 }
 

@@ -32,6 +32,7 @@ pub mod level;
 pub mod pipeline;
 pub mod recon;
 pub mod render;
+pub mod transfer;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 pub mod util;

@@ -20,6 +20,8 @@ pub enum Stream {
     Variant = 7,
     /// The noise of one sampling step of one variant.
     SamplingStep = 8,
+    /// The random draws of detail transfer (one variant, one level).
+    Transfer = 9,
 }
 
 /// SplitMix64 of the tuple (seed, index, stream, step): `index` is the level

@@ -52,15 +52,6 @@ pub struct Job {
     pub array: Option<String>,
 }
 
-/// Levels an exemplar encoded with `config` has (coarsest .. finest, doubling).
-pub fn level_count(config: &Config) -> usize {
-    let (mut r, mut n) = (config.encode.coarsest_resolution.max(1), 1);
-    while r < config.encode.finest_resolution {
-        r *= 2;
-        n += 1;
-    }
-    n
-}
 
 fn quote(p: &Path) -> String {
     format!("'{}'", p.display().to_string().replace('\'', r"'\''"))
@@ -93,7 +84,8 @@ pub fn job_graph(mesh: &Path, out: &Path, config: &Config, opts: &GraphOptions) 
         opts.profile.clone()
     };
     let c = &config.cluster;
-    let levels = level_count(config);
+    // One training task per level with a network (detail transfer makes the rest).
+    let levels = config.trained_levels();
     let shard = c.variants_per_job.max(1);
     let shards = opts.n.div_ceil(shard);
     let logs = out.join("slurm").join("logs");
@@ -211,7 +203,7 @@ mod tests {
         let jobs = job_graph(Path::new("/data/tower.obj"), Path::new("/runs/tower"), &config, &opts).unwrap();
         let stages: Vec<&str> = jobs.iter().map(|j| j.stage).collect();
         assert_eq!(stages, ["encode", "train", "sample", "mesh", "eval"]);
-        assert_eq!(level_count(&config), 4);
+        assert_eq!(config.trained_levels(), 4);
         assert_eq!(jobs[1].array.as_deref(), Some("0-3"), "one task per level");
         assert_eq!(jobs[2].array.as_deref(), Some("0-2"), "10 variants in shards of 4");
         assert!(jobs[1].script.contains("--requeue") && jobs[1].script.contains("--level \"$SLURM_ARRAY_TASK_ID\""));

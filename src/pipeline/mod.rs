@@ -127,9 +127,10 @@ fn train_digest(source_sha: &str, config: &Config, k: usize) -> String {
 }
 
 /// The levels whose training is not finished (no stamp for this exemplar and
-/// configuration) in `models`.
+/// configuration) in `models`: of the exemplar's `level_count` levels, those
+/// with a network (detail transfer makes the finest `transfer.levels`).
 pub fn levels_to_train(level_count: usize, source_sha: &str, config: &Config, models: &Path) -> Vec<usize> {
-    (0..level_count)
+    (0..level_count.min(config.trained_levels()))
         .filter(|&k| !is_done(models, &format!("train_level_{k}"), &train_digest(source_sha, config, k)))
         .collect()
 }
@@ -341,12 +342,19 @@ pub fn train_stage(
     progress: bool,
 ) -> Result<Vec<train::TrainReport>> {
     std::fs::create_dir_all(models_dir).map_err(|e| Error::file(models_dir, e.to_string()))?;
+    let trained = levels.len().min(config.trained_levels());
     let which: Vec<usize> = match only {
         Some(k) if k >= levels.len() => {
             return Err(Error::Invalid(format!("--level {k}: the exemplar has levels 0..{}", levels.len() - 1)))
         }
+        Some(k) if k >= trained => {
+            return Err(Error::Invalid(format!(
+                "--level {k}: made by detail transfer (transfer.levels = {}), nothing to train",
+                config.transfer.levels
+            )))
+        }
         Some(k) => vec![k],
-        None => (0..levels.len()).collect(),
+        None => (0..trained).collect(),
     };
     let mut reports = Vec::new();
     for k in which {
@@ -402,7 +410,7 @@ pub fn sample_stage(
     // sampling options except which shard computed it, and its index.
     let common = digest(&[
         &config.stage_digest("sample"),
-        &std::fs::read_to_string(train::state_path(models_dir, exemplar_levels.len() - 1)).unwrap_or_default(),
+        &std::fs::read_to_string(train::state_path(models_dir, trained_levels(config, exemplar_levels) - 1)).unwrap_or_default(),
         &format!("{:?}", SampleOptions { first: 0, n: 0, ..options.clone() }),
     ]);
     let todo: Vec<usize> = indices
@@ -416,8 +424,7 @@ pub fn sample_stage(
         return Ok(dirs);
     }
     let t = Instant::now();
-    let levels = options.stop_level.map_or(exemplar_levels.len(), |k| k + 1);
-    let models = sample::load_models(models_dir, config, levels, device)?;
+    let models = sample::load_models(models_dir, config, models_needed(config, exemplar_levels, options.stop_level), device)?;
     let provenance = Provenance {
         exemplar: exemplar_name.into(),
         seed: Some(options.seed),
@@ -427,13 +434,71 @@ pub fn sample_stage(
     for &i in &todo {
         let tv = Instant::now();
         let one = SampleOptions { first: i, n: 1, ..options.clone() };
-        let v = sample::sample(&models, exemplar_levels, &one, None)?;
+        let v = sample_variants(&models, exemplar_levels, &one, None)?;
         let dir = variant_dir(variants_dir, i);
         dataset::write_variant(&dir, &v[0], &provenance, previews, config.output.write_options())?;
         mark_done(&dir, "sample", &digest(&[&common, &i.to_string()]), tv.elapsed().as_secs_f64())?;
     }
     log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
     Ok(dirs)
+}
+
+/// Levels of an exemplar with a trained network under `config`.
+pub fn trained_levels(config: &Config, exemplar_levels: &[Level]) -> usize {
+    exemplar_levels.len().min(config.trained_levels()).max(1)
+}
+
+/// How many levels' networks sampling up to `stop_level` (None: the finest) needs.
+pub fn models_needed(config: &Config, exemplar_levels: &[Level], stop_level: Option<usize>) -> usize {
+    stop_level.map_or(usize::MAX, |k| k + 1).min(trained_levels(config, exemplar_levels))
+}
+
+/// Samples variants: the trained levels by the reverse process
+/// ([`sample::sample`]), the finest `transfer.levels` by detail transfer
+/// ([`transfer::extend`]), up to `opts.stop_level`. With `from` (a level k),
+/// levels k+1 .. are produced from it. Returns, per variant, its levels
+/// coarsest first (`from` itself not included).
+pub fn sample_variants(
+    models: &sample::Models,
+    exemplar_levels: &[Level],
+    opts: &SampleOptions,
+    from: Option<Level>,
+) -> Result<Vec<Vec<Level>>> {
+    let count = exemplar_levels.len();
+    let last = opts.stop_level.unwrap_or(count.saturating_sub(1));
+    if last >= count {
+        return Err(Error::Invalid(format!("stop level {last} asked for, the exemplar has levels 0..{}", count.saturating_sub(1))));
+    }
+    let networks = models.levels();
+    let diffusion_last = last.min(networks - 1);
+    let mut variants = match &from {
+        // Continuing from a level at or past the networks' last: transfer only.
+        Some(level) if level.index >= diffusion_last && level.index < last => vec![Vec::new(); opts.n],
+        _ => sample::sample(models, exemplar_levels, &SampleOptions { stop_level: Some(diffusion_last), ..opts.clone() }, from.clone())?,
+    };
+    if last > diffusion_last {
+        let config = &models.config.transfer;
+        if networks + config.levels < count {
+            return Err(Error::Invalid(format!(
+                "level {} has neither a trained network nor detail transfer (transfer.levels = {})",
+                networks, config.levels
+            )));
+        }
+        for (i, v) in variants.iter_mut().enumerate() {
+            let t = Instant::now();
+            let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
+            let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, sample::variant_seed(opts.seed, opts.first + i))?;
+            log::info!(
+                "sample: variant {} levels {}..{} by detail transfer in {:.1} s",
+                opts.first + i,
+                coarse.index + 1,
+                last,
+                t.elapsed().as_secs_f64()
+            );
+            v.extend(finer);
+        }
+    }
+    Ok(variants)
 }
 
 /// Writes the resolved configuration into a folder (`config.toml`).
@@ -620,8 +685,8 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
     match config {
         Some(config) => {
             let t = Instant::now();
-            let untrained = sample::untrained_models(config, levels.len(), device, options.seed).and_then(|m| {
-                sample::sample(&m, &levels, &SampleOptions::from_config(config, 1, options.seed), None)
+            let untrained = sample::untrained_models(config, trained_levels(config, &levels), device, options.seed).and_then(|m| {
+                sample_variants(&m, &levels, &SampleOptions::from_config(config, 1, options.seed), None)
             });
             match untrained {
                 Ok(mut v) if v.first().and_then(|l| l.last()).is_some_and(|l| l.len() > 0 && l.index + 1 == levels.len()) => {

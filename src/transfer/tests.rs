@@ -1,0 +1,105 @@
+use glam::{DVec3, IVec3};
+
+use super::*;
+use crate::testing::synthetic::sphere_levels;
+
+fn sorted(level: &Level) -> Vec<(IVec3, [u32; 9])> {
+    let mut v: Vec<_> = (0..level.len())
+        .map(|i| {
+            let f = [level.offsets[i], level.normals[i], level.colours[i]];
+            (level.coords[i], bytemuck_free(f))
+        })
+        .collect();
+    v.sort_by_key(|(c, _)| (c.x, c.y, c.z));
+    v
+}
+
+fn bytemuck_free(f: [glam::Vec3; 3]) -> [u32; 9] {
+    let mut o = [0u32; 9];
+    for (k, v) in f.iter().enumerate() {
+        for a in 0..3 {
+            o[k * 3 + a] = v[a].to_bits();
+        }
+    }
+    o
+}
+
+fn on() -> TransferConfig {
+    TransferConfig { levels: 1, ..Default::default() }
+}
+
+/// Given the exemplar's own coarse level, transfer gives back the exemplar's
+/// fine level: every voxel's best match is itself (distance 0), and a voxel
+/// that has not found it takes it over from a neighbour that has.
+#[test]
+fn the_exemplar_reproduces_itself() {
+    let levels = sphere_levels(&[16, 32], DVec3::new(0.05, -0.1, 0.02), 0.6);
+    let t = transfer(&levels[0], &levels[1], &levels[0], None, &on(), 7).unwrap();
+    assert_eq!(t.level.index, 1);
+    assert_eq!(t.level.resolution, 32);
+    let got = sorted(&t.level);
+    let want = sorted(&levels[1]);
+    assert_eq!(got.len(), want.len());
+    let same = got.iter().zip(&want).filter(|(a, b)| a == b).count();
+    assert!(same as f64 >= 0.98 * want.len() as f64, "{same} of {} voxels reproduced", want.len());
+    // Sources are the fine voxels copied: here, the voxels themselves.
+    let exact = t.level.coords.iter().zip(&t.sources).filter(|(c, s)| c == s).count();
+    assert!(exact as f64 >= 0.98 * want.len() as f64);
+}
+
+/// Starting from the voxels copied (a previous transfer), nothing moves.
+#[test]
+fn a_transferred_level_keeps_its_sources() {
+    let levels = sphere_levels(&[16, 32], DVec3::ZERO, 0.55);
+    let init: Vec<IVec3> = levels[0].coords.clone();
+    let t = transfer(&levels[0], &levels[1], &levels[0], Some(&init), &on(), 1).unwrap();
+    assert_eq!(sorted(&t.level), sorted(&levels[1]));
+}
+
+/// A variant that is the exemplar moved by whole coarse voxels gets the
+/// exemplar's fine voxels moved by twice as many fine voxels, colours and all.
+#[test]
+fn transfer_follows_the_variant_not_the_exemplar() {
+    let levels = sphere_levels(&[16, 32], DVec3::ZERO, 0.5);
+    let shift = IVec3::new(3, -2, 1);
+    let mut moved = levels[0].clone();
+    moved.coords.iter_mut().for_each(|c| *c += shift);
+    let t = transfer(&levels[0], &levels[1], &moved, None, &on(), 3).unwrap();
+    let mut want = levels[1].clone();
+    want.coords.iter_mut().for_each(|c| *c += shift * 2);
+    let (got, want) = (sorted(&t.level), sorted(&want));
+    let want_set: std::collections::HashSet<_> = want.iter().collect();
+    let same = got.iter().filter(|v| want_set.contains(v)).count();
+    assert!(same as f64 >= 0.98 * want.len() as f64, "{same} of {}", want.len());
+}
+
+/// Only the coarse level's surface voxels (mask > 0) get children, and none
+/// outside them.
+#[test]
+fn children_stay_inside_their_coarse_voxels() {
+    let levels = sphere_levels(&[16, 32], DVec3::ZERO, 0.5);
+    let mut coarse = levels[0].clone();
+    let half = coarse.len() / 2;
+    coarse.mask.iter_mut().take(half).for_each(|m| *m = -1.0);
+    let t = transfer(&levels[0], &levels[1], &coarse, None, &on(), 5).unwrap();
+    let kept: std::collections::HashSet<IVec3> =
+        (0..coarse.len()).filter(|&i| coarse.mask[i] > 0.0).map(|i| coarse.coords[i]).collect();
+    assert!(!t.level.is_empty());
+    assert!(t.level.coords.iter().all(|c| kept.contains(&c.div_euclid(IVec3::splat(2)))));
+}
+
+#[test]
+fn same_seed_same_level_and_bad_inputs_are_errors() {
+    let levels = sphere_levels(&[16, 32, 64], DVec3::ZERO, 0.5);
+    let a = transfer(&levels[0], &levels[1], &levels[0], None, &on(), 11).unwrap();
+    let b = transfer(&levels[0], &levels[1], &levels[0], None, &on(), 11).unwrap();
+    assert_eq!(sorted(&a.level), sorted(&b.level));
+    // levels that do not chain
+    assert!(transfer(&levels[0], &levels[2], &levels[0], None, &on(), 1).is_err());
+    assert!(transfer(&levels[0], &levels[1], &levels[1], None, &on(), 1).is_err());
+    let bad = TransferConfig { radius: 0, ..on() };
+    assert!(transfer(&levels[0], &levels[1], &levels[0], None, &bad, 1).is_err());
+    // an empty variant gives an empty level
+    let empty = Level { resolution: 16, ..Default::default() };
+    assert!(transfer(&levels[0], &levels[1], &empty, None, &on(), 1).unwrap().level.is_empty());
+}
