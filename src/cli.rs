@@ -308,7 +308,7 @@ pub enum Command {
         n: usize,
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// A shipped profile (cpu, paper) or a TOML file.
+        /// A shipped profile (cpu, demo, paper) or a TOML file.
         #[arg(long, default_value = "cpu")]
         profile: String,
         /// Override one value: --set cluster.variants_per_job=10 (repeatable).
@@ -425,12 +425,20 @@ pub enum EditOp {
     },
 }
 
+impl SetupArgs {
+    /// The profile given, or `default`.
+    pub fn profile<'a>(&'a self, default: &'a str) -> &'a str {
+        self.profile.as_deref().unwrap_or(default)
+    }
+}
+
 /// Configuration and device.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SetupArgs {
-    /// A shipped profile (cpu, paper) or a TOML file.
-    #[arg(long, default_value = "cpu")]
-    pub profile: String,
+    /// A shipped profile (cpu, demo, paper) or a TOML file [default: cpu;
+    /// `demo`: demo].
+    #[arg(long)]
+    pub profile: Option<String>,
     /// Override one value: --set train.level0_iterations=500 (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     pub overrides: Vec<String>,
@@ -558,8 +566,10 @@ fn device(spec: &str) -> Result<tch::Device> {
 /// and where everything went.
 fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32) -> Result<()> {
     let device = device(&args.setup.device)?;
+    // The demo's own profile (sized for its 10-minute budget) unless one is given.
+    let default = if matches!(exemplar, pipeline::ExemplarSource::Demo) { "demo" } else { "cpu" };
     let options = pipeline::run::RunOptions {
-        config: Config::load(&args.setup.profile, &args.setup.overrides)?,
+        config: Config::load(args.setup.profile(default), &args.setup.overrides)?,
         device,
         device_spec: args.setup.device.clone(),
         n: args.n,
@@ -744,7 +754,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Train { dir, models, level, resume, jobs, setup } => {
-            let config = Config::load(&setup.profile, &setup.overrides)?;
+            let config = Config::load(setup.profile("cpu"), &setup.overrides)?;
             let device = device(&setup.device)?;
             let (manifest, levels) = dataset::read(&dir)?;
             let models = models.unwrap_or_else(|| dir.join("models"));
@@ -762,7 +772,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                         .arg(&dir)
                         .arg("--models")
                         .arg(&models)
-                        .args(["--level", &k.to_string(), "--profile", &setup.profile, "--device", &setup.device]);
+                        .args(["--level", &k.to_string(), "--profile", setup.profile("cpu"), "--device", &setup.device]);
                     for o in &setup.overrides {
                         c.args(["--set", o]);
                     }

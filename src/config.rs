@@ -10,6 +10,7 @@ use crate::error::{Error, Result};
 /// Profiles that ship with the program: (name, TOML text).
 pub const PROFILES: &[(&str, &str)] = &[
     ("cpu", include_str!("../profiles/cpu.toml")),
+    ("demo", include_str!("../profiles/demo.toml")),
     ("paper", include_str!("../profiles/paper.toml")),
 ];
 
@@ -238,6 +239,13 @@ impl Config {
         Ok(config)
     }
 
+    /// A configuration from TOML text (as recorded).
+    pub fn read_str(text: &str) -> Result<Config> {
+        let c: Config = toml::from_str(text).map_err(|e| Error::Invalid(format!("configuration: {}", one_line(&e))))?;
+        c.validate()?;
+        Ok(c)
+    }
+
     /// Reads a configuration recorded in an output folder.
     pub fn read(path: &std::path::Path) -> Result<Config> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
@@ -294,16 +302,17 @@ impl Config {
     /// Number of levels with a trained diffusion model: all but the finest
     /// `transfer.levels`, which detail transfer makes.
     pub fn trained_levels(&self) -> usize {
-        self.levels().saturating_sub(self.transfer.levels)
+        let from = self.transfer.from_resolution;
+        (0..self.levels()).take_while(|&l| from == 0 || self.encode.coarsest_resolution << l < from).count()
     }
 
     fn validate(&self) -> Result<()> {
         self.transfer.validate().map_err(Error::Invalid)?;
-        if self.transfer.levels >= self.levels() {
+        let from = self.transfer.from_resolution;
+        if from != 0 && from <= self.encode.coarsest_resolution {
             return Err(Error::Invalid(format!(
-                "transfer.levels = {} leaves no level for the networks (the configuration has {} levels; level 0 is always sampled)",
-                self.transfer.levels,
-                self.levels()
+                "transfer.from_resolution = {from} would leave level 0 ({}^3) without a network: it must be finer",
+                self.encode.coarsest_resolution
             )));
         }
         let e = &self.encode;
@@ -435,12 +444,42 @@ mod tests {
 
     /// Digests are recorded in every stamp and level file: a change of the
     /// configuration's text (a field renamed, retyped or dropped) makes every
-    /// existing run retrain. The cpu profile's digest as 67f8725 recorded it.
+    /// existing run retrain. The cpu profile's digest as 67f8725 recorded it
+    /// (four levels to 128^3, no detail transfer: the profile before 2026-12-01).
+    #[test]
+    fn detail_transfer_levels() {
+        let cpu = Config::load("cpu", &[]).unwrap();
+        assert_eq!((cpu.levels(), cpu.trained_levels()), (5, 3), "networks 16..64, transfer 128 and 256");
+        let demo = Config::load("demo", &[]).unwrap();
+        assert_eq!((demo.levels(), demo.trained_levels()), (4, 3));
+        let paper = Config::load("paper", &[]).unwrap();
+        assert!(paper.transfer.is_off());
+        assert_eq!(paper.trained_levels(), 5);
+        // A small test configuration keeps its networks: 16, 32 are below 128.
+        let small = Config::load("cpu", &["encode.finest_resolution=32".into()]).unwrap();
+        assert_eq!(small.trained_levels(), 2);
+        let all = Config::load("cpu", &["transfer.from_resolution=32".into()]).unwrap();
+        assert_eq!(all.trained_levels(), 1);
+        // Recorded, transfer changes what sampling depends on, not training.
+        assert_ne!(all.stage_digest("sample"), cpu.stage_digest("sample"));
+        assert_eq!(all.stage_digest("train"), cpu.stage_digest("train"));
+        for bad in ["transfer.from_resolution=16", "transfer.from_resolution=100", "transfer.radius=0", "transfer.coherence=1.5"] {
+            let e = Config::load("cpu", &[bad.into()]).unwrap_err().to_string();
+            assert!(e.contains("transfer"), "{bad}: {e}");
+        }
+    }
+
     #[test]
     fn digests_of_existing_runs_stay_valid() {
-        assert_eq!(Config::load("cpu", &[]).unwrap().digest(), "ec8270f7727c41f7");
-        let recorded = Config::load("cpu", &["train.mixing=\"code\"".into()]).unwrap();
+        let before = ["encode.sampling_resolution=512".to_string(), "encode.finest_resolution=128".into(), "transfer.from_resolution=0".into()];
+        assert_eq!(Config::load("cpu", &before).unwrap().digest(), "ec8270f7727c41f7");
+        let mut with_mixing = before.to_vec();
+        with_mixing.push("train.mixing=\"code\"".into());
+        let recorded = Config::load("cpu", &with_mixing).unwrap();
         assert_eq!(recorded.digest(), "ec8270f7727c41f7");
+        // Transfer off is not written: the configuration reads back the same.
+        assert!(!recorded.to_toml().contains("transfer"));
+        assert_eq!(Config::read_str(&recorded.to_toml()).unwrap(), recorded);
         let err = Config::load("cpu", &["train.mixing=\"paper\"".into()]).unwrap_err().to_string();
         assert!(err.contains("paper"), "{err}");
     }
@@ -467,7 +506,8 @@ mod tests {
 
     #[test]
     fn mesh_settings_default_for_old_configs_and_take_overrides() {
-        let a = Config::load("cpu", &[]).unwrap();
+        // (Configurations from before [mesh] had no [transfer] either.)
+        let a = Config::load("cpu", &["transfer.from_resolution=0".into()]).unwrap();
         assert_eq!(a.mesh, MeshConfig { faces: 0, glb: false });
         // A configuration recorded before [mesh] existed still reads.
         let old: String = a.to_toml().split("[mesh]").next().unwrap().to_string();

@@ -250,3 +250,59 @@ fn sampling_is_reproducible_and_follows_options() {
     assert!(sample(&models, &levels, &opts, Some(last)).is_err());
     let _ = Tensor::zeros([1], (Kind::Float, Device::Cpu));
 }
+
+/// With detail transfer from 16^3, a model trained at level 0 only gives
+/// variants through 32^3: level 0 from the network, levels 1 and 2 copied
+/// from the exemplar (its colours exactly), each inside its coarse level;
+/// reproducible per variant and shard, and `--from` a level continues it.
+#[test]
+fn sampling_with_detail_transfer() {
+    use shapeshifter::pipeline::{models_needed, sample_variants};
+    let _guard = serial();
+    let config = tiny(&[
+        "train.level0_iterations=40",
+        "encode.sampling_resolution=64",
+        "encode.coarsest_resolution=8",
+        "encode.finest_resolution=32",
+        "transfer.from_resolution=16",
+    ]);
+    let levels = sphere_levels(&[8, 16, 32], DVec3::new(0.05, -0.1, 0.0), 0.55);
+    assert_eq!(shapeshifter::pipeline::trained_levels(&config, &levels), 1);
+    let dir = tempfile::tempdir().unwrap();
+    train_level(&TrainJob::new(&levels, 0, &config, Device::Cpu, dir.path())).unwrap();
+    assert_eq!(models_needed(&config, &levels, None), 1);
+    let models = load_models(dir.path(), &config, 1, Device::Cpu).unwrap();
+    let opts = SampleOptions::from_config(&config, 3, 5);
+    let a = sample_variants(&models, &levels, &opts, None).unwrap();
+    let exemplar_colours: Vec<std::collections::HashSet<[u32; 3]>> =
+        levels.iter().map(|l| l.colours.iter().map(|c| c.to_array().map(f32::to_bits)).collect()).collect();
+    for v in &a {
+        assert_eq!(v.iter().map(|l| (l.index, l.resolution)).collect::<Vec<_>>(), vec![(0, 8), (1, 16), (2, 32)]);
+        assert!(!v[2].is_empty(), "transfer produced nothing");
+        for l in 1..3 {
+            let parents: std::collections::HashSet<IVec3> = v[l - 1].coords.iter().cloned().collect();
+            assert!(v[l].coords.iter().all(|c| parents.contains(&c.div_euclid(IVec3::splat(2)))), "level {l} leaves its coarse level");
+            assert!(v[l].colours.iter().all(|c| exemplar_colours[l].contains(&c.to_array().map(f32::to_bits))), "level {l}: a colour the exemplar does not have");
+            assert_eq!(v[l].frame, levels[0].frame);
+        }
+    }
+    let b = sample_variants(&models, &levels, &opts, None).unwrap();
+    assert!(same(&a, &b), "same seed, different output");
+    let shard = sample_variants(&models, &levels, &SampleOptions { first: 1, n: 2, ..opts.clone() }, None).unwrap();
+    assert!(same(&shard, &a[1..3]), "a shard differs");
+    // Stopping at level 1, and continuing from it, reproduce the same levels.
+    let stop = sample_variants(&models, &levels, &SampleOptions { stop_level: Some(1), ..opts.clone() }, None).unwrap();
+    assert!(same(&stop, &a.iter().map(|v| v[..2].to_vec()).collect::<Vec<_>>()));
+    let one = SampleOptions { first: 1, n: 1, ..opts.clone() };
+    let cont = sample_variants(&models, &levels, &one, Some(a[1][0].clone())).unwrap();
+    assert_eq!(cont[0].len(), 2, "levels 1 and 2 from level 0");
+    // Nothing finer than the exemplar's last level.
+    assert!(sample_variants(&models, &levels, &SampleOptions { stop_level: Some(3), ..opts.clone() }, None).is_err(), "level 3 sampled");
+    // Without transfer, the missing networks are an error, not a silent stop.
+    let off = tiny(&["train.level0_iterations=40", "transfer.from_resolution=0"]);
+    let models_off = load_models(dir.path(), &off, 1, Device::Cpu).unwrap();
+    match sample_variants(&models_off, &levels, &opts, None) {
+        Ok(_) => panic!("sampled three levels with one network and no transfer"),
+        Err(e) => assert!(e.to_string().contains("needs its trained network"), "{e}"),
+    }
+}

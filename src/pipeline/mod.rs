@@ -128,7 +128,7 @@ fn train_digest(source_sha: &str, config: &Config, k: usize) -> String {
 
 /// The levels whose training is not finished (no stamp for this exemplar and
 /// configuration) in `models`: of the exemplar's `level_count` levels, those
-/// with a network (detail transfer makes the finest `transfer.levels`).
+/// with a network (detail transfer makes those of `transfer.from_resolution` and finer).
 pub fn levels_to_train(level_count: usize, source_sha: &str, config: &Config, models: &Path) -> Vec<usize> {
     (0..level_count.min(config.trained_levels()))
         .filter(|&k| !is_done(models, &format!("train_level_{k}"), &train_digest(source_sha, config, k)))
@@ -349,8 +349,8 @@ pub fn train_stage(
         }
         Some(k) if k >= trained => {
             return Err(Error::Invalid(format!(
-                "--level {k}: made by detail transfer (transfer.levels = {}), nothing to train",
-                config.transfer.levels
+                "--level {k}: made by detail transfer (transfer.from_resolution = {}), nothing to train",
+                config.transfer.from_resolution
             )))
         }
         Some(k) => vec![k],
@@ -454,7 +454,7 @@ pub fn models_needed(config: &Config, exemplar_levels: &[Level], stop_level: Opt
 }
 
 /// Samples variants: the trained levels by the reverse process
-/// ([`sample::sample`]), the finest `transfer.levels` by detail transfer
+/// ([`sample::sample`]), those of `transfer.from_resolution` and finer by detail transfer
 /// ([`transfer::extend`]), up to `opts.stop_level`. With `from` (a level k),
 /// levels k+1 .. are produced from it. Returns, per variant, its levels
 /// coarsest first (`from` itself not included).
@@ -469,8 +469,20 @@ pub fn sample_variants(
     if last >= count {
         return Err(Error::Invalid(format!("stop level {last} asked for, the exemplar has levels 0..{}", count.saturating_sub(1))));
     }
-    let networks = models.levels();
+    // Levels with a network under the configuration; the finer ones are transferred.
+    let networks = trained_levels(&models.config, exemplar_levels);
     let diffusion_last = last.min(networks - 1);
+    let start = from.as_ref().map_or(0, |l| l.index + 1);
+    if start <= diffusion_last && models.levels() <= diffusion_last {
+        return Err(Error::Invalid(format!(
+            "level {diffusion_last} needs its trained network (networks of levels 0..{} loaded; detail transfer: {})",
+            models.levels() - 1,
+            match models.config.transfer.from_resolution {
+                0 => "off".to_string(),
+                r => format!("from {r}^3"),
+            }
+        )));
+    }
     let mut variants = match &from {
         // Continuing from a level at or past the networks' last: transfer only.
         Some(level) if level.index >= diffusion_last && level.index < last => vec![Vec::new(); opts.n],
@@ -478,12 +490,6 @@ pub fn sample_variants(
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
-        if networks + config.levels < count {
-            return Err(Error::Invalid(format!(
-                "level {} has neither a trained network nor detail transfer (transfer.levels = {})",
-                networks, config.levels
-            )));
-        }
         for (i, v) in variants.iter_mut().enumerate() {
             let t = Instant::now();
             let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;

@@ -39,9 +39,10 @@ use crate::util::rng::Rng;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TransferConfig {
-    /// How many of the finest levels are made by transfer instead of a trained
-    /// diffusion model (0: none, the paper's method).
-    pub levels: usize,
+    /// Levels of this resolution (voxels per axis) and finer are made by
+    /// transfer instead of a trained diffusion model (0: none, the paper's
+    /// method). Level 0 always has a network.
+    pub from_resolution: u32,
     /// Half-width of the matched window, coarse voxels (1: 3^3 cells).
     pub radius: i32,
     /// PatchMatch rounds on a level whose coarse level came from a network.
@@ -63,12 +64,12 @@ pub struct TransferConfig {
 impl Default for TransferConfig {
     fn default() -> Self {
         TransferConfig {
-            levels: 0,
-            radius: 1,
+            from_resolution: 0,
+            radius: 3,
             rounds: 8,
             refine_rounds: 2,
             random_candidates: 4,
-            coherence: 0.1,
+            coherence: 0.5,
             occupancy_weight: 1.0,
             offset_weight: 1.0,
             normal_weight: 0.5,
@@ -79,7 +80,7 @@ impl Default for TransferConfig {
 
 impl TransferConfig {
     pub fn is_off(&self) -> bool {
-        self.levels == 0
+        self.from_resolution == 0
     }
     pub fn validate(&self) -> Result<(), String> {
         if !(1..=3).contains(&self.radius) {
@@ -88,6 +89,9 @@ impl TransferConfig {
         let w = [self.occupancy_weight, self.offset_weight, self.normal_weight, self.colour_weight, self.coherence];
         if w.iter().any(|x| !(x.is_finite() && *x >= 0.0)) || self.coherence >= 1.0 {
             return Err("transfer weights must be finite and >= 0, coherence below 1".into());
+        }
+        if self.from_resolution != 0 && !self.from_resolution.is_power_of_two() {
+            return Err(format!("transfer.from_resolution {} must be a power of two (or 0: off)", self.from_resolution));
         }
         if self.rounds == 0 {
             return Err("transfer.rounds must be at least 1".into());

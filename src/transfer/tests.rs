@@ -25,7 +25,7 @@ fn bytemuck_free(f: [glam::Vec3; 3]) -> [u32; 9] {
 }
 
 fn on() -> TransferConfig {
-    TransferConfig { levels: 1, ..Default::default() }
+    TransferConfig { from_resolution: 32, ..Default::default() }
 }
 
 /// Given the exemplar's own coarse level, transfer gives back the exemplar's
