@@ -175,6 +175,23 @@ fn distance(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
 }
 
+/// Floats summed between checks against the bound (a few window cells).
+const DISTANCE_BLOCK: usize = 80;
+
+/// [`distance`], or some value above `bound` as soon as the partial sum
+/// exceeds it: most PatchMatch candidates lose, and lose early.
+#[inline]
+fn distance_below(a: &[f32], b: &[f32], bound: f32) -> f32 {
+    let mut sum = 0.0;
+    for (x, y) in a.chunks(DISTANCE_BLOCK).zip(b.chunks(DISTANCE_BLOCK)) {
+        sum += distance(x, y);
+        if sum >= bound {
+            return sum;
+        }
+    }
+    sum
+}
+
 /// The level after `coarse` (a variant's level, index l - 1) by detail transfer
 /// from the exemplar's levels l - 1 and l. `init`: per voxel of `coarse`, the
 /// exemplar voxel it was itself copied from (a previous transfer), if any.
@@ -268,7 +285,10 @@ pub fn transfer(
                 let d = var_d(i);
                 let mut best = matches[i];
                 let consider = |best: &mut (u32, f32), s: u32, factor: f32| {
-                    let cost = distance(d, ex_d(s)) * factor;
+                    if s == best.0 {
+                        return;
+                    }
+                    let cost = distance_below(d, ex_d(s), best.1 / factor) * factor;
                     if cost < best.1 {
                         *best = (s, cost);
                     }
