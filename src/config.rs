@@ -471,7 +471,19 @@ mod tests {
 
     #[test]
     fn digests_of_existing_runs_stay_valid() {
-        let before = ["encode.sampling_resolution=512".to_string(), "encode.finest_resolution=128".into(), "transfer.from_resolution=0".into()];
+        let before: Vec<String> = [
+            "encode.sampling_resolution=512",
+            "encode.finest_resolution=128",
+            "transfer.from_resolution=0",
+            "model.channels=32",
+            "model.upsampler_channels=16",
+            "train.level0_iterations=2500",
+            "train.upper_iterations=1000",
+            "train.upsampler_iterations=400",
+            "train.bf16=false",
+        ]
+        .map(String::from)
+        .to_vec();
         assert_eq!(Config::load("cpu", &before).unwrap().digest(), "ec8270f7727c41f7");
         let mut with_mixing = before.to_vec();
         with_mixing.push("train.mixing=\"code\"".into());

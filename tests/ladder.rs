@@ -10,9 +10,9 @@ use shapeshifter::config::Config;
 use shapeshifter::eval::ladder::Rung;
 use shapeshifter::{encode::exemplar, pipeline};
 
-/// The demo exemplar encoded as `run` encodes it with the cpu profile.
+/// The demo exemplar encoded as `demo` encodes it (the demo profile: 128^3).
 fn encoded_demo(dir: &std::path::Path) -> (std::path::PathBuf, Config) {
-    let config = Config::load("cpu", &[]).unwrap();
+    let config = Config::load("demo", &[]).unwrap();
     let mesh = exemplar::ruined_tower(&Default::default());
     let enc = dir.join("exemplar");
     pipeline::encode_stage(&mesh, "demo", "0", &config, &enc).unwrap();

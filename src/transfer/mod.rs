@@ -392,7 +392,7 @@ pub fn extend(
             cfg,
             derive_seed(seed, l as u64, Stream::Transfer, 0),
         )?;
-        log::debug!("transfer: level {l} ({}^3, {} voxels) in {:.2} s", next.level.resolution, next.level.len(), t.elapsed().as_secs_f64());
+        log::info!("transfer: level {l} ({}^3, {} voxels) in {:.2} s", next.level.resolution, next.level.len(), t.elapsed().as_secs_f64());
         sources = Some(next.sources);
         out.push(next.level);
     }
