@@ -203,8 +203,9 @@ mod tests {
         let jobs = job_graph(Path::new("/data/tower.obj"), Path::new("/runs/tower"), &config, &opts).unwrap();
         let stages: Vec<&str> = jobs.iter().map(|j| j.stage).collect();
         assert_eq!(stages, ["encode", "train", "sample", "mesh", "eval"]);
-        assert_eq!(config.trained_levels(), 4);
-        assert_eq!(jobs[1].array.as_deref(), Some("0-3"), "one task per level");
+        // One task per level with a network: 16, 32, 64 (128 and 256 are transferred).
+        assert_eq!(config.trained_levels(), 3);
+        assert_eq!(jobs[1].array.as_deref(), Some("0-2"), "one task per level");
         assert_eq!(jobs[2].array.as_deref(), Some("0-2"), "10 variants in shards of 4");
         assert!(jobs[1].script.contains("--requeue") && jobs[1].script.contains("--level \"$SLURM_ARRAY_TASK_ID\""));
         assert!(jobs[1].script.contains("--gres=gpu:1") && jobs[1].script.contains("--device cuda"));
