@@ -5,7 +5,7 @@
 //! Data flows one way, one folder per stage:
 //!
 //! ```text
-//! io::mesh ──> encode ──> level ──> learn::train ──> learn::sample ──> recon / io::vdb ──> eval, render
+//! io::mesh ──> encode ──> level ──> learn::train ──> learn::sample ──> transfer ──> recon / io::vdb ──> eval, render
 //! ```
 //!
 //! - [`io`]: the only callers of C++ (the one cxx bridge): meshes through
@@ -15,6 +15,8 @@
 //! - [`level`]: one level as plain data, an encoded folder on disk, editing.
 //! - [`learn`]: the only users of tensors: sparse grids and convolution, the
 //!   networks, the diffusion schedule, checkpoints, training and sampling.
+//! - [`transfer`]: detail transfer: the fine levels copied from the exemplar
+//!   where the coarse neighbourhoods match (no network, no tensors).
 //! - [`recon`]: oriented points into triangle meshes.
 //! - [`eval`]: quality measures, the `eval` command, the degradation ladder.
 //! - [`render`]: previews, contact sheets, `report.html`.
