@@ -54,6 +54,11 @@ pub struct TransferConfig {
     pub random_candidates: usize,
     /// Relative bonus of a neighbour's shifted match (0: none).
     pub coherence: f32,
+    /// A fine voxel exists where most of the sources proposed by the 3^3
+    /// neighbours' matches have it, copied from the source most of them share
+    /// (mends seams between copied regions); false: the voxel's own match's
+    /// children.
+    pub vote: bool,
     /// Weights of the descriptor's channels (squared-distance weights).
     pub occupancy_weight: f32,
     pub offset_weight: f32,
@@ -70,6 +75,7 @@ impl Default for TransferConfig {
             refine_rounds: 2,
             random_candidates: 4,
             coherence: 0.5,
+            vote: false,
             occupancy_weight: 1.0,
             offset_weight: 1.0,
             normal_weight: 0.5,
@@ -346,16 +352,42 @@ pub fn transfer(
     }
     // Copy: the children of each match in the exemplar's fine level.
     let fine_index = index_of(exemplar_fine);
+    let neighbourhood: Vec<IVec3> = window(1).into_iter().map(|(d, _)| d).collect();
     let voxels: Vec<(IVec3, usize, IVec3)> = (0..var_rows.len())
         .into_par_iter()
         .flat_map_iter(|i| {
             let v = var_coord(i);
             let e = ex_coord(matches[i].0);
+            // With voting, the sources this voxel's neighbours' matches propose
+            // for it (each shifted back by the neighbour's offset): inside a
+            // coherent region they all equal `e`; at a seam between two copied
+            // regions they disagree, and a child exists where most say so.
+            let proposals: Vec<IVec3> = if cfg.vote {
+                neighbourhood
+                    .iter()
+                    .filter_map(|&o| var_slot.get(&(v + o)).map(|&j| ex_coord(matches[j as usize].0) - o))
+                    .filter(|p| ex_slot.contains_key(p))
+                    .collect()
+            } else {
+                Vec::new()
+            };
             let fine_index = &fine_index;
             (0..8).filter_map(move |a| {
                 let child = IVec3::new(a & 1, (a >> 1) & 1, (a >> 2) & 1);
-                let src = e * 2 + child;
-                fine_index.get(&src).map(|&j| (v * 2 + child, j as usize, src))
+                let own = e * 2 + child;
+                if proposals.is_empty() {
+                    return fine_index.get(&own).map(|&j| (v * 2 + child, j as usize, own));
+                }
+                let present: Vec<IVec3> =
+                    proposals.iter().map(|p| *p * 2 + child).filter(|s| fine_index.contains_key(s)).collect();
+                if 2 * present.len() <= proposals.len() {
+                    return None;
+                }
+                // The source most proposals share (inside a coherent region: the
+                // own match's, so exact copies stay exact); ties go to the own match.
+                let votes = |s: &IVec3| present.iter().filter(|p| *p == s).count();
+                let src = present.iter().copied().max_by_key(|s| (votes(s), *s == own)).unwrap_or(own);
+                Some((v * 2 + child, fine_index[&src] as usize, src))
             })
         })
         .collect();

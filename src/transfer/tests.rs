@@ -33,8 +33,14 @@ fn on() -> TransferConfig {
 /// that has not found it takes it over from a neighbour that has.
 #[test]
 fn the_exemplar_reproduces_itself() {
+    for vote in [false, true] {
+        reproduces_itself(&TransferConfig { vote, ..on() });
+    }
+}
+
+fn reproduces_itself(cfg: &TransferConfig) {
     let levels = sphere_levels(&[16, 32], DVec3::new(0.05, -0.1, 0.02), 0.6);
-    let t = transfer(&levels[0], &levels[1], &levels[0], None, &on(), 7).unwrap();
+    let t = transfer(&levels[0], &levels[1], &levels[0], None, cfg, 7).unwrap();
     assert_eq!(t.level.index, 1);
     assert_eq!(t.level.resolution, 32);
     let got = sorted(&t.level);
@@ -71,6 +77,24 @@ fn transfer_follows_the_variant_not_the_exemplar() {
     let want_set: std::collections::HashSet<_> = want.iter().collect();
     let same = got.iter().filter(|v| want_set.contains(v)).count();
     assert!(same as f64 >= 0.98 * want.len() as f64, "{same} of {}", want.len());
+}
+
+/// At a seam, voting follows the majority: a voxel whose own match is wrong
+/// but whose neighbours' matches agree gets the children they propose.
+#[test]
+fn voting_mends_a_lone_wrong_match() {
+    let levels = sphere_levels(&[16, 32], DVec3::ZERO, 0.55);
+    // Sources as a previous transfer would give them: every voxel itself,
+    // except one voxel sent to the far side of the sphere.
+    let mut init: Vec<IVec3> = levels[0].coords.clone();
+    let k = levels[0].len() / 3;
+    init[k] = -init[k] + IVec3::splat(15);
+    let cfg = TransferConfig { rounds: 1, refine_rounds: 0, random_candidates: 0, ..on() };
+    let wrong = transfer(&levels[0], &levels[1], &levels[0], Some(&init), &TransferConfig { vote: false, ..cfg.clone() }, 1).unwrap();
+    let voted = transfer(&levels[0], &levels[1], &levels[0], Some(&init), &TransferConfig { vote: true, ..cfg }, 1).unwrap();
+    let want = sorted(&levels[1]);
+    assert_eq!(sorted(&voted.level), want, "voting restores the exemplar");
+    assert_ne!(sorted(&wrong.level), want, "without voting the wrong match is copied (the test would prove nothing)");
 }
 
 /// Only the coarse level's surface voxels (mask > 0) get children, and none
