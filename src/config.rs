@@ -232,16 +232,18 @@ impl Config {
         for o in overrides {
             apply_override(&mut table, o)?;
         }
-        let config: Config = toml::Value::Table(table)
+        let mut config: Config = toml::Value::Table(table)
             .try_into()
             .map_err(|e: toml::de::Error| Error::Invalid(format!("configuration: {}", one_line(&e))))?;
+        config.normalise();
         config.validate()?;
         Ok(config)
     }
 
     /// A configuration from TOML text (as recorded).
     pub fn read_str(text: &str) -> Result<Config> {
-        let c: Config = toml::from_str(text).map_err(|e| Error::Invalid(format!("configuration: {}", one_line(&e))))?;
+        let mut c: Config = toml::from_str(text).map_err(|e| Error::Invalid(format!("configuration: {}", one_line(&e))))?;
+        c.normalise();
         c.validate()?;
         Ok(c)
     }
@@ -249,7 +251,8 @@ impl Config {
     /// Reads a configuration recorded in an output folder.
     pub fn read(path: &std::path::Path) -> Result<Config> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
-        let c: Config = toml::from_str(&text).map_err(|e| Error::file(path, one_line(&e)))?;
+        let mut c: Config = toml::from_str(&text).map_err(|e| Error::file(path, one_line(&e)))?;
+        c.normalise();
         c.validate()?;
         Ok(c)
     }
@@ -297,6 +300,14 @@ impl Config {
     /// Number of levels, from the resolutions.
     pub fn levels(&self) -> usize {
         (self.encode.finest_resolution / self.encode.coarsest_resolution).trailing_zeros() as usize + 1
+    }
+
+    /// Detail transfer off: its other settings do nothing and are not
+    /// written, so they are reset, and a configuration reads back equal.
+    fn normalise(&mut self) {
+        if self.transfer.is_off() {
+            self.transfer = crate::transfer::TransferConfig::default();
+        }
     }
 
     /// Number of levels with a trained diffusion model: all but the finest

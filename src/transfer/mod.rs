@@ -75,7 +75,7 @@ impl Default for TransferConfig {
             refine_rounds: 2,
             random_candidates: 4,
             coherence: 0.5,
-            vote: false,
+            vote: true,
             occupancy_weight: 1.0,
             offset_weight: 1.0,
             normal_weight: 0.5,
