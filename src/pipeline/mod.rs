@@ -342,7 +342,7 @@ pub fn train_stage(
     progress: bool,
 ) -> Result<Vec<train::TrainReport>> {
     std::fs::create_dir_all(models_dir).map_err(|e| Error::file(models_dir, e.to_string()))?;
-    let trained = levels.len().min(config.trained_levels());
+    let trained = trained_levels(config, levels);
     let which: Vec<usize> = match only {
         Some(k) if k >= levels.len() => {
             return Err(Error::Invalid(format!("--level {k}: the exemplar has levels 0..{}", levels.len() - 1)))
@@ -443,7 +443,7 @@ pub fn sample_stage(
     Ok(dirs)
 }
 
-/// Levels of an exemplar with a trained network under `config`.
+/// Levels of an exemplar with a trained network under `config` (level 0 always has one).
 pub fn trained_levels(config: &Config, exemplar_levels: &[Level]) -> usize {
     exemplar_levels.len().min(config.trained_levels()).max(1)
 }
@@ -491,16 +491,8 @@ pub fn sample_variants(
     if last > diffusion_last {
         let config = &models.config.transfer;
         for (i, v) in variants.iter_mut().enumerate() {
-            let t = Instant::now();
             let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
             let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, sample::variant_seed(opts.seed, opts.first + i))?;
-            log::info!(
-                "sample: variant {} levels {}..{} by detail transfer in {:.1} s",
-                opts.first + i,
-                coarse.index + 1,
-                last,
-                t.elapsed().as_secs_f64()
-            );
             v.extend(finer);
         }
     }

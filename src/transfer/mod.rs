@@ -124,15 +124,34 @@ pub struct Transferred {
 /// Values per window cell: occupancy, offset (3), normal (3), colour (3).
 const CELL: usize = 10;
 
-/// Coordinates of the surface voxels (mask > 0) to their rows.
-fn index_of(level: &Level) -> HashMap<IVec3, u32> {
-    let mut m = HashMap::with_capacity(level.len());
-    for (i, (&c, &mask)) in level.coords.iter().zip(&level.mask).enumerate() {
-        if mask > 0.0 {
-            m.insert(c, i as u32);
-        }
+/// The surface voxels (mask > 0) of a level, numbered 0.. in row order
+/// ("slots"), with a lookup by coordinate.
+struct Surface<'a> {
+    level: &'a Level,
+    /// The level's row of each slot.
+    rows: Vec<u32>,
+    slot: HashMap<IVec3, u32>,
+}
+
+impl<'a> Surface<'a> {
+    fn new(level: &'a Level) -> Self {
+        let rows: Vec<u32> = (0..level.len() as u32).filter(|&i| level.mask[i as usize] > 0.0).collect();
+        let slot = rows.iter().enumerate().map(|(s, &r)| (level.coords[r as usize], s as u32)).collect();
+        Surface { level, rows, slot }
     }
-    m
+    fn len(&self) -> usize {
+        self.rows.len()
+    }
+    fn coord(&self, s: u32) -> IVec3 {
+        self.level.coords[self.rows[s as usize] as usize]
+    }
+    fn find(&self, c: IVec3) -> Option<u32> {
+        self.slot.get(&c).copied()
+    }
+    /// The level's row of the surface voxel at `c`.
+    fn row(&self, c: IVec3) -> Option<usize> {
+        self.find(c).map(|s| self.rows[s as usize] as usize)
+    }
 }
 
 /// The window's cell offsets and their weights (a Gaussian of the distance, sigma = radius).
@@ -150,16 +169,16 @@ fn window(radius: i32) -> Vec<(IVec3, f32)> {
     w
 }
 
-/// Descriptors of the rows `rows` of `level`, one block of `window.len() * CELL` each.
-fn descriptors(level: &Level, index: &HashMap<IVec3, u32>, rows: &[u32], window: &[(IVec3, f32)], cfg: &TransferConfig) -> Vec<f32> {
+/// Descriptors of the surface voxels, one block of `window.len() * CELL` per slot.
+fn descriptors(surface: &Surface, window: &[(IVec3, f32)], cfg: &TransferConfig) -> Vec<f32> {
+    let level = surface.level;
     let width = window.len() * CELL;
     let (wo, wp, wn, wc) = (cfg.occupancy_weight.sqrt(), cfg.offset_weight.sqrt(), cfg.normal_weight.sqrt(), cfg.colour_weight.sqrt());
-    let mut out = vec![0f32; rows.len() * width];
-    out.par_chunks_mut(width).zip(rows.par_iter()).for_each(|(d, &r)| {
-        let c = level.coords[r as usize];
+    let mut out = vec![0f32; surface.len() * width];
+    out.par_chunks_mut(width).enumerate().for_each(|(s, d)| {
+        let c = surface.coord(s as u32);
         for (k, &(o, g)) in window.iter().enumerate() {
-            let Some(&j) = index.get(&(c + o)) else { continue };
-            let j = j as usize;
+            let Some(j) = surface.row(c + o) else { continue };
             let g = g.sqrt();
             let cell = &mut d[k * CELL..(k + 1) * CELL];
             cell[0] = wo * g;
@@ -216,12 +235,8 @@ pub fn transfer(
         )));
     }
     cfg.validate().map_err(TransferError::Invalid)?;
-    let ex_index = index_of(exemplar_coarse);
-    let var_index = index_of(coarse);
-    let mut ex_rows: Vec<u32> = ex_index.values().copied().collect();
-    ex_rows.sort_unstable();
-    let mut var_rows: Vec<u32> = var_index.values().copied().collect();
-    var_rows.sort_unstable();
+    let ex = Surface::new(exemplar_coarse);
+    let var = Surface::new(coarse);
     let fine_level = |voxels: Vec<(IVec3, usize, IVec3)>| {
         let mut level = Level {
             index: coarse.index + 1,
@@ -240,30 +255,22 @@ pub fn transfer(
         }
         Transferred { level, sources }
     };
-    if ex_rows.is_empty() || var_rows.is_empty() {
+    if ex.len() == 0 || var.len() == 0 {
         return Ok(fine_level(Vec::new()));
     }
-    // Exemplar voxel (by its position in ex_rows) of each coordinate.
-    let ex_slot: HashMap<IVec3, u32> =
-        ex_rows.iter().enumerate().map(|(s, &r)| (exemplar_coarse.coords[r as usize], s as u32)).collect();
     let win = window(cfg.radius);
     let width = win.len() * CELL;
-    let ex_desc = descriptors(exemplar_coarse, &ex_index, &ex_rows, &win, cfg);
-    let var_desc = descriptors(coarse, &var_index, &var_rows, &win, cfg);
+    let ex_desc = descriptors(&ex, &win, cfg);
+    let var_desc = descriptors(&var, &win, cfg);
     let ex_d = |s: u32| &ex_desc[s as usize * width..(s as usize + 1) * width];
     let var_d = |i: usize| &var_desc[i * width..(i + 1) * width];
-    // Variant slot of each coordinate (neighbour lookups).
-    let var_slot: HashMap<IVec3, u32> =
-        var_rows.iter().enumerate().map(|(s, &r)| (coarse.coords[r as usize], s as u32)).collect();
-    let var_coord = |i: usize| coarse.coords[var_rows[i] as usize];
-    let ex_coord = |s: u32| exemplar_coarse.coords[ex_rows[s as usize] as usize];
-    let n_ex = ex_rows.len() as u64;
+    let n_ex = ex.len() as u64;
 
     // Start: the voxel copied from (consecutive transfers) or a random one.
-    let mut matches: Vec<(u32, f32)> = (0..var_rows.len())
+    let mut matches: Vec<(u32, f32)> = (0..var.len())
         .into_par_iter()
         .map(|i| {
-            let from = init.and_then(|s| s.get(var_rows[i] as usize)).and_then(|c| ex_slot.get(c)).copied();
+            let from = init.and_then(|s| s.get(var.rows[i] as usize)).and_then(|&c| ex.find(c));
             let s = from.unwrap_or_else(|| {
                 (Rng::new(derive_seed(seed, i as u64, Stream::Transfer, 0)).next_u64() % n_ex) as u32
             });
@@ -284,10 +291,10 @@ pub fn transfer(
     }
     let bonus = 1.0 - cfg.coherence;
     for round in 1..=rounds {
-        matches = (0..var_rows.len())
+        matches = (0..var.len())
             .into_par_iter()
             .map(|i| {
-                let c = var_coord(i);
+                let c = var.coord(i as u32);
                 let d = var_d(i);
                 let mut best = matches[i];
                 let consider = |best: &mut (u32, f32), s: u32, factor: f32| {
@@ -301,23 +308,22 @@ pub fn transfer(
                 };
                 // Neighbours' matches, shifted back by the neighbour's offset.
                 for &o in &steps {
-                    if let Some(&j) = var_slot.get(&(c + o)) {
-                        let target = ex_coord(matches[j as usize].0) - o;
-                        if let Some(&s) = ex_slot.get(&target) {
+                    if let Some(j) = var.find(c + o) {
+                        if let Some(s) = ex.find(ex.coord(matches[j as usize].0) - o) {
                             consider(&mut best, s, bonus);
                         }
                     }
                 }
                 let mut rng = Rng::new(derive_seed(seed, i as u64, Stream::Transfer, round as u64));
                 // Near the current match, at shrinking radii.
-                let here = ex_coord(best.0);
+                let here = ex.coord(best.0);
                 for r in [8, 4, 2, 1] {
                     let o = IVec3::new(
                         (rng.next_u64() % (2 * r + 1)) as i32 - r as i32,
                         (rng.next_u64() % (2 * r + 1)) as i32 - r as i32,
                         (rng.next_u64() % (2 * r + 1)) as i32 - r as i32,
                     );
-                    if let Some(&s) = ex_slot.get(&(here + o)) {
+                    if let Some(s) = ex.find(here + o) {
                         consider(&mut best, s, 1.0);
                     }
                 }
@@ -332,13 +338,13 @@ pub fn transfer(
     if log::log_enabled!(log::Level::Debug) {
         // Coherence: face-neighbour pairs whose matches are neighbours the same way.
         let (mut pairs, mut whole) = (0usize, 0usize);
-        for i in 0..var_rows.len() {
+        for i in 0..var.len() {
             for a in 0..3 {
                 let mut o = IVec3::ZERO;
                 o[a] = 1;
-                if let Some(&j) = var_slot.get(&(var_coord(i) + o)) {
+                if let Some(j) = var.find(var.coord(i as u32) + o) {
                     pairs += 1;
-                    whole += (ex_coord(matches[j as usize].0) == ex_coord(matches[i].0) + o) as usize;
+                    whole += (ex.coord(matches[j as usize].0) == ex.coord(matches[i].0) + o) as usize;
                 }
             }
         }
@@ -346,18 +352,18 @@ pub fn transfer(
         log::debug!(
             "transfer to {}^3: {} voxels, mean match distance {mean:.3}, coherent neighbour pairs {:.1}%",
             coarse.resolution * 2,
-            var_rows.len(),
+            var.len(),
             100.0 * whole as f64 / pairs.max(1) as f64
         );
     }
     // Copy: the children of each match in the exemplar's fine level.
-    let fine_index = index_of(exemplar_fine);
+    let fine = Surface::new(exemplar_fine);
     let neighbourhood: Vec<IVec3> = window(1).into_iter().map(|(d, _)| d).collect();
-    let voxels: Vec<(IVec3, usize, IVec3)> = (0..var_rows.len())
+    let voxels: Vec<(IVec3, usize, IVec3)> = (0..var.len())
         .into_par_iter()
         .flat_map_iter(|i| {
-            let v = var_coord(i);
-            let e = ex_coord(matches[i].0);
+            let v = var.coord(i as u32);
+            let e = ex.coord(matches[i].0);
             // With voting, the sources this voxel's neighbours' matches propose
             // for it (each shifted back by the neighbour's offset): inside a
             // coherent region they all equal `e`; at a seam between two copied
@@ -365,21 +371,21 @@ pub fn transfer(
             let proposals: Vec<IVec3> = if cfg.vote {
                 neighbourhood
                     .iter()
-                    .filter_map(|&o| var_slot.get(&(v + o)).map(|&j| ex_coord(matches[j as usize].0) - o))
-                    .filter(|p| ex_slot.contains_key(p))
+                    .filter_map(|&o| var.find(v + o).map(|j| ex.coord(matches[j as usize].0) - o))
+                    .filter(|&p| ex.find(p).is_some())
                     .collect()
             } else {
                 Vec::new()
             };
-            let fine_index = &fine_index;
+            let fine = &fine;
             (0..8).filter_map(move |a| {
                 let child = IVec3::new(a & 1, (a >> 1) & 1, (a >> 2) & 1);
                 let own = e * 2 + child;
                 if proposals.is_empty() {
-                    return fine_index.get(&own).map(|&j| (v * 2 + child, j as usize, own));
+                    return fine.row(own).map(|j| (v * 2 + child, j, own));
                 }
                 let present: Vec<IVec3> =
-                    proposals.iter().map(|p| *p * 2 + child).filter(|s| fine_index.contains_key(s)).collect();
+                    proposals.iter().map(|p| *p * 2 + child).filter(|&s| fine.find(s).is_some()).collect();
                 if 2 * present.len() <= proposals.len() {
                     return None;
                 }
@@ -387,7 +393,7 @@ pub fn transfer(
                 // own match's, so exact copies stay exact); ties go to the own match.
                 let votes = |s: &IVec3| present.iter().filter(|p| *p == s).count();
                 let src = present.iter().copied().max_by_key(|s| (votes(s), *s == own)).unwrap_or(own);
-                Some((v * 2 + child, fine_index[&src] as usize, src))
+                Some((v * 2 + child, fine.row(src)?, src))
             })
         })
         .collect();
