@@ -758,10 +758,12 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let device = device(&setup.device)?;
             let (manifest, levels) = dataset::read(&dir)?;
             let models = models.unwrap_or_else(|| dir.join("models"));
-            pipeline::record_config(&models, &config)?;
+            // Refused before anything is written (a level detail transfer makes, a resume of nothing).
+            pipeline::levels_to_run(&config, &levels, level)?;
             if resume && !models.is_dir() {
                 anyhow::bail!("{}: --resume, but there is no models folder", models.display());
             }
+            pipeline::record_config(&models, &config)?;
             let jobs = pipeline::run::auto_jobs(jobs, device, cli.threads);
             if level.is_none() && jobs > 1 {
                 let todo = pipeline::levels_to_train(levels.len(), &manifest.source_sha256, &config, &models);

@@ -423,3 +423,27 @@ fn point_grids_go_beside_the_volumes_unless_asked_and_pyopenvdb_reads_every_leve
     assert!(o.status.success(), "readAll failed: {}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "['Cd', 'N', 'P', 'density', 'mask']");
 }
+
+/// `train` refuses what it cannot do before writing anything: a level that
+/// detail transfer makes, a resume without a models folder, a transfer
+/// setting out of range.
+#[test]
+fn train_refusals_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = small_tower_ply(dir.path());
+    let enc = dir.path().join("enc");
+    let e = enc.to_str().unwrap();
+    let o = shapeshifter(&["encode", ply.to_str().unwrap(), "-o", e, "--sampling-resolution", "64", "--finest", "32"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let models = dir.path().join("models");
+    let m = models.to_str().unwrap();
+    let o = shapeshifter(&["train", e, "--models", m, "--level", "1", "--set", "transfer.from_resolution=32"]);
+    assert_clean_failure(&o, "--level 1", "made by detail transfer");
+    assert!(!models.exists(), "a refused train wrote {:?}", listing(&models));
+    let o = shapeshifter(&["train", e, "--models", m, "--resume"]);
+    assert_clean_failure(&o, "models", "--resume, but there is no models folder");
+    assert!(!models.exists());
+    let o = shapeshifter(&["train", e, "--models", m, "--set", "transfer.coherence=2"]);
+    assert_clean_failure(&o, "transfer", "coherence below 1");
+    assert!(!models.exists());
+}

@@ -330,20 +330,11 @@ fn steps_logged(log: &Path) -> usize {
     upsampler + diffusion
 }
 
-/// Trains the given levels (all when `only` is None) into `models_dir`,
-/// resuming any level that was interrupted.
-pub fn train_stage(
-    levels: &[Level],
-    source_sha: &str,
-    config: &Config,
-    device: tch::Device,
-    models_dir: &Path,
-    only: Option<usize>,
-    progress: bool,
-) -> Result<Vec<train::TrainReport>> {
-    std::fs::create_dir_all(models_dir).map_err(|e| Error::file(models_dir, e.to_string()))?;
+/// The levels `train --level` (`only`) or a whole training asks for: an
+/// error for a level the exemplar lacks or that detail transfer makes.
+pub fn levels_to_run(config: &Config, levels: &[Level], only: Option<usize>) -> Result<Vec<usize>> {
     let trained = trained_levels(config, levels);
-    let which: Vec<usize> = match only {
+    Ok(match only {
         Some(k) if k >= levels.len() => {
             return Err(Error::Invalid(format!("--level {k}: the exemplar has levels 0..{}", levels.len() - 1)))
         }
@@ -355,7 +346,22 @@ pub fn train_stage(
         }
         Some(k) => vec![k],
         None => (0..trained).collect(),
-    };
+    })
+}
+
+/// Trains the given levels (all when `only` is None) into `models_dir`,
+/// resuming any level that was interrupted.
+pub fn train_stage(
+    levels: &[Level],
+    source_sha: &str,
+    config: &Config,
+    device: tch::Device,
+    models_dir: &Path,
+    only: Option<usize>,
+    progress: bool,
+) -> Result<Vec<train::TrainReport>> {
+    let which = levels_to_run(config, levels, only)?;
+    std::fs::create_dir_all(models_dir).map_err(|e| Error::file(models_dir, e.to_string()))?;
     let mut reports = Vec::new();
     for k in which {
         let d = train_digest(source_sha, config, k);
