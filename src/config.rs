@@ -192,6 +192,29 @@ pub struct SampleConfig {
     pub sampler: crate::learn::schedule::Sampler,
     pub level0_steps: usize,
     pub upper_steps: usize,
+    /// The last reverse step's rule (not written at its default, so the
+    /// digests of configurations without it stay valid).
+    #[serde(default, skip_serializing_if = "crate::learn::schedule::FinalStep::is_default")]
+    pub final_step: crate::learn::schedule::FinalStep,
+    /// Level-0 shapes sampled per variant, at most (1: no rejection): each
+    /// is kept only when its structure against the exemplar's level 0
+    /// scores at least `level0_min_structure`; the first that does is the
+    /// variant's, else the best. 16^3 costs little, and a broken coarse
+    /// shape is what no finer level mends.
+    #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
+    pub level0_candidates: usize,
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub level0_min_structure: f64,
+}
+
+fn one_usize() -> usize {
+    1
+}
+fn is_one_usize(v: &usize) -> bool {
+    *v == 1
+}
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Config {
@@ -268,6 +291,9 @@ impl Config {
                 .collect::<Result<Vec<_>, _>>()
                 .map(|v| v.join("\n")),
             "sample" => [
+                // How networks were taught and how their predictions are stepped.
+                Ok(crate::learn::schedule::TRAINING_PARAMETERISATION.to_string()),
+                Ok(crate::learn::schedule::SAMPLING_PARAMETERISATION.to_string()),
                 toml::to_string(&self.encode),
                 toml::to_string(&self.model),
                 toml::to_string(&self.train),
@@ -279,7 +305,12 @@ impl Config {
             .into_iter()
             .collect::<Result<Vec<_>, _>>()
             .map(|v| v.join("\n")),
-            "train" => [toml::to_string(&self.encode), toml::to_string(&self.model), toml::to_string(&self.train)]
+            "train" => [
+                Ok(crate::learn::schedule::TRAINING_PARAMETERISATION.to_string()),
+                toml::to_string(&self.encode),
+                toml::to_string(&self.model),
+                toml::to_string(&self.train),
+            ]
                 .into_iter()
                 .collect::<Result<Vec<_>, _>>()
                 .map(|v| v.join("\n")),
@@ -355,6 +386,12 @@ impl Config {
         }
         if self.sample.level0_steps == 0 || self.sample.upper_steps == 0 {
             return Err(Error::Invalid("sample steps must be at least 1".into()));
+        }
+        if self.sample.level0_candidates == 0 || self.sample.level0_candidates > 64 {
+            return Err(Error::Invalid("sample.level0_candidates must be in 1..=64".into()));
+        }
+        if !(0.0..=1.0).contains(&self.sample.level0_min_structure) {
+            return Err(Error::Invalid("sample.level0_min_structure must be in [0, 1]".into()));
         }
         Ok(())
     }

@@ -27,7 +27,17 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
     let outcome = pipeline::ladder_stage(&enc, &out, Some(&config), tch::Device::Cpu).unwrap();
     let rows = &outcome.evaluation.report.variants;
     let names: Vec<&str> = rows.iter().map(|r| r.name.as_str()).collect();
-    for r in [Rung::Exemplar, Rung::SmoothWeak, Rung::SmoothStrong, Rung::WashedOut, Rung::ShuffledColours, Rung::Blob] {
+    for r in [
+        Rung::Exemplar,
+        Rung::SmoothWeak,
+        Rung::SmoothStrong,
+        Rung::WashedOut,
+        Rung::ShuffledColours,
+        Rung::Blob,
+        Rung::Fragment,
+        Rung::Torn,
+        Rung::Shrunken,
+    ] {
         assert!(names.contains(&r.name()), "rung {} scored: {names:?}", r.name());
         assert!(out.join(r.name()).join("level_3.vdb").is_file(), "rung folder {}", r.name());
     }
@@ -35,6 +45,12 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
     assert!(outcome.checks.len() >= 24, "{} checks", outcome.checks.len());
     assert!(outcome.checks.iter().any(|c| c.metric.starts_with("colour.") && c.rung == "shuffled_colours"));
     assert!(outcome.checks.iter().any(|c| c.metric.starts_with("detail.") && c.rung == "blob"));
+    // The structural rungs are checked by the structure measures and flags.
+    for rung in ["fragment", "torn", "shrunken"] {
+        assert!(outcome.checks.iter().any(|c| c.metric == "structure.score" && c.rung == rung), "{rung}");
+        assert!(outcome.checks.iter().any(|c| c.metric.starts_with("structure.flags") && c.rung == rung), "{rung}");
+    }
+    assert!(outcome.checks.iter().any(|c| c.metric.starts_with("structure.flags") && c.rung == "exemplar"));
     let failed: Vec<String> = outcome
         .failed()
         .map(|c| format!("{} on {}: {:.4} vs exemplar {:.4} ({})", c.metric, c.rung, c.value, c.exemplar, c.requirement))
@@ -44,6 +60,15 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
     // boundary score rates the smoothed rung as high as the exemplar.
     let get = |r: Rung| rows.iter().find(|v| v.name == r.name()).unwrap();
     assert!(get(Rung::SmoothStrong).lp_fscore_above_95 > 0.9, "LP-F > 0.95 cannot see a blur");
+    // And the literature's LP-IoU rates a torn surface above what whole
+    // variants score (0.75-0.8): every patch of it exists somewhere on the
+    // exemplar. The structure flags it.
+    let torn = get(Rung::Torn);
+    assert!(torn.lp_iou > 0.85, "LP-IoU {}", torn.lp_iou);
+    let torn_flags = &torn.structure.as_ref().expect("structure measured").flags;
+    assert!(torn_flags.contains(&shapeshifter::level::structure::Flag::Torn), "{torn_flags:?}");
+    let flags = outcome.evaluation.report.structure.as_ref().expect("structure measured");
+    assert!(flags.near_copies >= 1 && flags.whole < flags.scored, "{flags:?}");
     assert!(out.join("contact_sheet.png").is_file() && out.join("ladder.json").is_file());
     let sheet = image::open(out.join("contact_sheet.png")).unwrap();
     assert!(sheet.width() > 6 * 320 && sheet.height() > 2 * 320, "{}x{}", sheet.width(), sheet.height());

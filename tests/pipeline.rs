@@ -199,6 +199,14 @@ fn sampling_is_reproducible_and_follows_options() {
     // ddpm works too
     let d = sample(&models, &levels, &SampleOptions { sampler: shapeshifter::learn::schedule::Sampler::Ddpm, ..opts.clone() }, None).unwrap();
     assert_eq!(d[0].len(), 2);
+    assert!(!same(&d, &a), "ddpm and ddim gave the same variants: the sampler setting is ignored");
+    // Clamped clean estimates: every sampled feature within its range.
+    for v in a.iter().chain(&d) {
+        for l in v {
+            assert!(l.offsets.iter().all(|o| o.abs().max_element() <= 0.5), "offset outside its voxel");
+            assert!(l.colours.iter().all(|c| c.min_element() >= 0.0 && c.max_element() <= 1.0));
+        }
+    }
 
     // fine levels only contain children of the coarse level
     for v in &a {
@@ -251,6 +259,79 @@ fn sampling_is_reproducible_and_follows_options() {
     last.index = 1;
     assert!(sample(&models, &levels, &opts, Some(last)).is_err());
     let _ = Tensor::zeros([1], (Kind::Float, Device::Cpu));
+}
+
+/// The level-0 rejection: candidate 0 is the variant's own noise, so one
+/// candidate, or a threshold the first one passes, changes nothing; with an
+/// unreachable threshold the best of the candidates is kept, never worse than
+/// the first by the structure score.
+#[test]
+fn level0_rejection_keeps_the_best_candidate() {
+    use shapeshifter::level::structure::{Structure, StructureParams, StructureScores};
+    let _guard = serial();
+    let config = tiny(&["train.level0_iterations=30", "train.upper_iterations=10", "train.upsampler_iterations=10"]);
+    let dir = tempfile::tempdir().unwrap();
+    let levels = trained(dir.path(), &config);
+    let models = load_models(dir.path(), &config, 2, Device::Cpu).unwrap();
+    let opts = SampleOptions { stop_level: Some(0), ..SampleOptions::from_config(&config, 4, 3) };
+    let plain = sample(&models, &levels, &opts, None).unwrap();
+    let easy = sample(&models, &levels, &SampleOptions { level0_candidates: 4, level0_min_structure: 0.0, ..opts.clone() }, None).unwrap();
+    assert!(same(&plain, &easy), "a threshold the first candidate passes changed the variants");
+    let hard = sample(&models, &levels, &SampleOptions { level0_candidates: 4, level0_min_structure: 1.0, ..opts.clone() }, None).unwrap();
+    let ex = Structure::of(&levels[0]);
+    let score = |l: &Level| {
+        if l.is_empty() {
+            0.0
+        } else {
+            StructureScores::new(l, &Structure::of(l), &levels[0], &ex, &StructureParams::default()).score
+        }
+    };
+    let mut better = 0;
+    for (p, h) in plain.iter().zip(&hard) {
+        let (sp, sh) = (score(&p[0]), score(&h[0]));
+        assert!(sh >= sp, "rejection kept a worse level 0: {sh} < {sp}");
+        better += (sh > sp) as usize;
+    }
+    assert!(better > 0, "four candidates never beat the first one of four variants");
+}
+
+/// Weights whose recorded parameterisation is not this program's (or was
+/// never recorded) are refused with one line naming the state file.
+#[test]
+fn weights_of_another_parameterisation_are_refused() {
+    let _guard = serial();
+    let config = tiny(&["train.level0_iterations=5", "train.upper_iterations=5", "train.upsampler_iterations=5"]);
+    let dir = tempfile::tempdir().unwrap();
+    trained(dir.path(), &config);
+    assert!(load_models(dir.path(), &config, 2, Device::Cpu).is_ok());
+    let path = state_path(dir.path(), 1);
+    let mut state = read_state(dir.path(), 1);
+    assert_eq!(state.parameterisation, shapeshifter::learn::schedule::TRAINING_PARAMETERISATION);
+    state.parameterisation.clear();
+    std::fs::write(&path, serde_json::to_string(&state).unwrap()).unwrap();
+    let e = load_models(dir.path(), &config, 2, Device::Cpu).err().expect("refused").to_string();
+    assert!(e.contains("level_1_state.json") && e.contains("earlier parameterisation") && e.contains("train it again"), "{e}");
+}
+
+/// Training noise comes from the step's own seed: libtorch's global
+/// generator (what dropout and initialisation draw from) does not change it.
+#[test]
+fn training_noise_ignores_the_global_generator() {
+    use shapeshifter::learn::train::{diffusion_step, TrainingData};
+    use tch::nn::OptimizerConfig;
+    let _guard = serial();
+    let config = tiny(&["model.dropout=0.0"]);
+    let levels = exemplar();
+    let loss = |global: i64| {
+        tch::manual_seed(5);
+        let net = new_diffusion(&config.model, 0, Device::Cpu).unwrap();
+        let mut opt = tch::nn::Adam::default().build(&net.vs, 1e-3).unwrap();
+        let mut batch = TrainingData::new(&levels, 0, Device::Cpu).unwrap().diffusion_batches(&config.train).unwrap();
+        let (x0, t) = batch(&mut shapeshifter::util::rng::Rng::new(1)).unwrap();
+        tch::manual_seed(global);
+        diffusion_step(&net.net, &mut opt, &x0, &Tensor::from_slice(&t), 1.0, 42).unwrap()
+    };
+    assert_eq!(loss(1), loss(2));
 }
 
 /// With detail transfer from 16^3, a model trained at level 0 only gives

@@ -27,13 +27,18 @@ pub enum Voxelisation {
     Surface,
 }
 
-/// A variant on disk: its finest level, its coarsest level, its mesh if any.
+/// A variant on disk: its finest level, its coarsest level, the level its
+/// structure is measured at, its mesh if any.
 pub struct VariantFiles {
     pub name: String,
     pub finest: Level,
     pub coarsest: Level,
+    /// The finest level of at most [`STRUCTURE_RESOLUTION`]^3.
+    pub structure: Option<Level>,
     pub mesh: Option<Mesh>,
 }
+
+pub use crate::level::structure::STRUCTURE_RESOLUTION;
 
 /// The `level_K.vdb` files of a folder, coarsest first (none read).
 pub fn level_files(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
@@ -53,17 +58,28 @@ pub fn level_files(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
     Ok(levels)
 }
 
-/// Reads a variant folder: the highest and lowest `level_K.vdb` present and
-/// `mesh.ply` if there.
+/// Reads a variant folder: the highest and lowest `level_K.vdb` present, the
+/// structure level (read upwards from the coarsest until one is finer than
+/// [`STRUCTURE_RESOLUTION`]: small files) and `mesh.ply` if there.
 pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let levels = level_files(dir)?;
-    let (lo, hi) = (&levels[0], &levels[levels.len() - 1]);
+    let hi = &levels[levels.len() - 1];
     let (finest, _) = vdb::read_level(&hi.1)?;
-    let (coarsest, _) = vdb::read_level(&lo.1)?;
+    let mut coarse_levels: Vec<Level> = Vec::new();
+    for (_, path) in &levels[..levels.len() - 1] {
+        let (level, _) = vdb::read_level(path)?;
+        let finer = level.resolution > STRUCTURE_RESOLUTION;
+        coarse_levels.push(level);
+        if finer {
+            break;
+        }
+    }
+    let coarsest = coarse_levels.first().cloned().unwrap_or_else(|| finest.clone());
+    let structure = coarse_levels.into_iter().chain(std::iter::once(finest.clone())).filter(|l| l.resolution <= STRUCTURE_RESOLUTION).last();
     let mesh_path = dir.join("mesh.ply");
     let mesh = if mesh_path.is_file() { Some(mesh::load(&mesh_path)?) } else { None };
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    Ok(VariantFiles { name, finest, coarsest, mesh })
+    Ok(VariantFiles { name, finest, coarsest, structure, mesh })
 }
 
 fn points_normalised(level: &Level) -> Vec<Vec3> {
@@ -156,6 +172,7 @@ pub fn evaluate(
         return Err(Error::Invalid("no variants to evaluate".into()));
     }
     let (_, levels) = dataset::read(exemplar_dir)?;
+    let ex_structure = crate::level::structure::structure_level(&levels);
     let (Some(ex_coarse), Some(ex_fine)) = (levels.first(), levels.last()) else {
         return Err(Error::file(exemplar_dir, "manifest lists no levels"));
     };
@@ -233,6 +250,7 @@ pub fn evaluate(
         occupancy_22: &ex_occ[1],
         finest: ex_fine,
         coarse_points: Some(&ex_coarse_pts),
+        structure_level: ex_structure,
     };
     let inputs: Vec<ShapeInput> = variants
         .iter()
@@ -244,6 +262,7 @@ pub fn evaluate(
             occupancy_22: &occ[1],
             finest: &v.finest,
             coarse_points: Some(c),
+            structure_level: v.structure.as_ref(),
         })
         .collect();
     metrics::check_shape(&exemplar)

@@ -15,7 +15,17 @@
 //! - `blob`: level 0 upsampled to the finest resolution by trilinear
 //!   interpolation of its planes, normals and colours, no detail added;
 //! - `untrained`: freshly initialised networks sampled through the method
-//!   (needs a configuration: the models folder's, or a profile).
+//!   (needs a configuration: the models folder's, or a profile);
+//! - the structural faults of coarse networks, made at a coarse level and
+//!   carried to every level (a finer voxel kept where its ancestor is, a
+//!   coarser one where a descendant is, as sampling makes finer levels from
+//!   coarser ones): `fragment` (a large connected part of the 32^3 level
+//!   removed: 45% of its surface, the far side from one extreme voxel),
+//!   `torn` (holes through the 64^3 surface: balls of 4 voxels around 12
+//!   random surface voxels, and their descendants), `shrunken` (every level
+//!   scaled by 0.6 about the exemplar's centroid and binned into voxels
+//!   again). The `exemplar` rung is also the copy: the near-copy flag must
+//!   fire on it.
 //!
 //! [`expectations`] says which rungs each measure must rank below the
 //! exemplar, by what margin, and [`check`] tests them on an evaluation.
@@ -41,10 +51,13 @@ pub enum Rung {
     ShuffledColours,
     Blob,
     Untrained,
+    Fragment,
+    Torn,
+    Shrunken,
 }
 
 impl Rung {
-    pub const ALL: [Rung; 7] = [
+    pub const ALL: [Rung; 10] = [
         Rung::Exemplar,
         Rung::SmoothWeak,
         Rung::SmoothStrong,
@@ -52,6 +65,9 @@ impl Rung {
         Rung::ShuffledColours,
         Rung::Blob,
         Rung::Untrained,
+        Rung::Fragment,
+        Rung::Torn,
+        Rung::Shrunken,
     ];
 
     /// Folder name, and the name in reports.
@@ -64,6 +80,9 @@ impl Rung {
             Rung::ShuffledColours => "shuffled_colours",
             Rung::Blob => "blob",
             Rung::Untrained => "untrained",
+            Rung::Fragment => "fragment",
+            Rung::Torn => "torn",
+            Rung::Shrunken => "shrunken",
         }
     }
 }
@@ -76,13 +95,29 @@ pub struct LadderOptions {
     pub smooth_strong_iterations: usize,
     /// The level the blob is upsampled from (0 = coarsest).
     pub blob_level: usize,
-    /// Seed of the colour shuffle.
+    /// Seed of the colour shuffle and of the torn rung's holes.
     pub seed: u64,
+    /// Share of the 32^3 level's surface voxels the fragment loses.
+    pub fragment_removed: f64,
+    /// Holes of the torn rung, and their radius (voxels of the 64^3 level).
+    pub torn_holes: usize,
+    pub torn_radius: f32,
+    /// Scale of the shrunken copy.
+    pub shrink: f32,
 }
 
 impl Default for LadderOptions {
     fn default() -> Self {
-        LadderOptions { smooth_weak_iterations: 2, smooth_strong_iterations: 8, blob_level: 0, seed: 17 }
+        LadderOptions {
+            smooth_weak_iterations: 2,
+            smooth_strong_iterations: 8,
+            blob_level: 0,
+            seed: 17,
+            fragment_removed: 0.45,
+            torn_holes: 12,
+            torn_radius: 4.0,
+            shrink: 0.6,
+        }
     }
 }
 
@@ -108,7 +143,122 @@ pub fn degrade(levels: &[Level], opts: &LadderOptions) -> Result<Vec<(Rung, Vec<
         (Rung::WashedOut, with_finest(washed_out(finest))),
         (Rung::ShuffledColours, with_finest(shuffled(finest, opts.seed))),
         (Rung::Blob, with_finest(blob(blob_source, finest))),
+        (Rung::Fragment, fragment(levels, opts.fragment_removed)),
+        (Rung::Torn, torn(levels, opts.torn_holes, opts.torn_radius, opts.seed)),
+        (Rung::Shrunken, levels.iter().map(|l| shrunken(l, finest, opts.shrink)).collect()),
     ])
+}
+
+/// The index of the finest level of at most `resolution`^3 (level 0 if all
+/// are finer).
+fn level_at(levels: &[Level], resolution: u32) -> usize {
+    levels.iter().rposition(|l| l.resolution <= resolution).unwrap_or(0)
+}
+
+/// Every level cut to the voxels related to `kept` (coordinates of level
+/// `k`): a finer voxel stays where its ancestor at `k` is kept, a coarser one
+/// where one of its descendants at `k` is, level `k`'s own where kept; levels
+/// coarser than `from` are left whole.
+fn carry(levels: &[Level], k: usize, kept: &std::collections::HashSet<IVec3>, from: usize) -> Vec<Level> {
+    let rk = levels[k].resolution as i32;
+    levels
+        .iter()
+        .enumerate()
+        .map(|(l, level)| {
+            let mut out = level.clone();
+            if l < from {
+                return out;
+            }
+            let r = level.resolution as i32;
+            if r >= rk {
+                let f = r / rk;
+                out.retain(|i| kept.contains(&level.coords[i].div_euclid(IVec3::splat(f))));
+            } else {
+                let f = rk / r;
+                let ancestors: std::collections::HashSet<IVec3> = kept.iter().map(|c| c.div_euclid(IVec3::splat(f))).collect();
+                out.retain(|i| ancestors.contains(&level.coords[i]));
+            }
+            out
+        })
+        .collect()
+}
+
+/// The fragment rung: on the 32^3 level, the surface voxels reached first by
+/// a breadth-first walk (26-neighbours) from the voxel of largest x are kept
+/// until `1 - removed` of them are; the rest, the far side, is removed, and
+/// the cut carried to every level ([`carry`]).
+pub fn fragment(levels: &[Level], removed: f64) -> Vec<Level> {
+    let k = level_at(levels, 32);
+    let level = &levels[k];
+    let act = active(level);
+    let index: std::collections::HashMap<IVec3, usize> = act.iter().enumerate().map(|(n, &i)| (level.coords[i], n)).collect();
+    let Some(start) = (0..act.len()).max_by_key(|&n| {
+        let c = level.coords[act[n]];
+        (c.x, -c.y, -c.z)
+    }) else {
+        return levels.to_vec();
+    };
+    let target = ((1.0 - removed) * act.len() as f64).round() as usize;
+    let mut kept = std::collections::HashSet::new();
+    let mut seen = vec![false; act.len()];
+    let mut queue = std::collections::VecDeque::from([start]);
+    seen[start] = true;
+    while let Some(n) = queue.pop_front() {
+        if kept.len() >= target {
+            break;
+        }
+        let c = level.coords[act[n]];
+        kept.insert(c);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Some(&m) = index.get(&(c + IVec3::new(dx, dy, dz))) {
+                        if !seen[m] {
+                            seen[m] = true;
+                            queue.push_back(m);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    carry(levels, k, &kept, 0)
+}
+
+/// The torn rung: `holes` balls of `radius` voxels around random surface
+/// voxels of the 64^3 level removed from it and, carried, from every finer
+/// level; the coarser levels are whole (the tear starts at 64^3).
+pub fn torn(levels: &[Level], holes: usize, radius: f32, seed: u64) -> Vec<Level> {
+    let k = level_at(levels, 64);
+    let level = &levels[k];
+    let act = active(level);
+    if act.is_empty() {
+        return levels.to_vec();
+    }
+    let mut rng = Rng::new(seed ^ 0x746f_726e);
+    let centres: Vec<Vec3> = (0..holes).map(|_| level.coords[act[rng.below(act.len())]].as_vec3()).collect();
+    let kept: std::collections::HashSet<IVec3> = act
+        .iter()
+        .map(|&i| level.coords[i])
+        .filter(|c| centres.iter().all(|h| h.distance(c.as_vec3()) > radius))
+        .collect();
+    carry(levels, k, &kept, k)
+}
+
+/// One level of the shrunken rung: its surface points scaled by `factor`
+/// about the centroid of `finest`'s points (normalised units, the same for
+/// every level), binned into voxels again.
+pub fn shrunken(level: &Level, finest: &Level, factor: f32) -> Level {
+    let fa = active(finest);
+    let centroid = fa.iter().fold(glam::DVec3::ZERO, |a, &i| a + finest.point_normalised(i)) / fa.len().max(1) as f64;
+    let vs = level.voxel_size() as f32;
+    // Normalised -> this level's voxel units: (p + 1) / vs.
+    let c = (centroid.as_vec3() + Vec3::ONE) / vs;
+    let act = active(level);
+    let points: Vec<Vec3> = act.iter().map(|&i| c + (point_voxels(level, i) - c) * factor).collect();
+    let normals: Vec<Vec3> = act.iter().map(|&i| level.normals[i]).collect();
+    let colours: Vec<Vec3> = act.iter().map(|&i| level.colours[i]).collect();
+    rebin(level, &points, &normals, &colours)
 }
 
 fn active(level: &Level) -> Vec<usize> {
@@ -298,6 +448,13 @@ pub struct Expectation {
 }
 
 const GEOMETRY_RUNGS: &[Rung] = &[Rung::SmoothWeak, Rung::SmoothStrong, Rung::Blob, Rung::Untrained];
+/// The structural faults of coarse networks.
+const STRUCTURE_RUNGS: &[Rung] = &[Rung::Fragment, Rung::Torn, Rung::Shrunken];
+
+/// A structure figure of a row; NaN (fails every check) when not measured.
+fn structure(v: &VariantScores, f: fn(&crate::level::structure::StructureScores) -> f64) -> f64 {
+    v.structure.as_ref().map_or(f64::NAN, f)
+}
 
 /// The measures and the rungs each must fail. Precision (the literature's LP
 /// scores) is expected to fail only noise: a smoothed or blob-like shape's
@@ -325,9 +482,15 @@ pub fn expectations() -> Vec<Expectation> {
         e("coverage_22.lp_iou", |v: &VariantScores| v.coverage_22.lp_iou, true, m05, GEOMETRY_RUNGS, true, false),
         e("detail.w1_deg", |v: &VariantScores| v.detail.w1_deg, false, tenth_rms, GEOMETRY_RUNGS, true, false),
         e("detail.rms_ratio (distance from 1)", |v: &VariantScores| (v.detail.rms_ratio - 1.0).abs(), false, m05, GEOMETRY_RUNGS, true, false),
-        e("colour.fscore", |v: &VariantScores| v.colour.fscore, true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
-        e("colour.precision", |v: &VariantScores| v.colour.precision, true, m10, &[WashedOut, ShuffledColours, Untrained], false, true),
-        e("colour.coverage", |v: &VariantScores| v.colour.coverage, true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
+        e("structure.score", |v: &VariantScores| structure(v, |s| s.score), true, m10, STRUCTURE_RUNGS, false, false),
+        e("structure.mass_ratio (distance from 1)", |v: &VariantScores| structure(v, |s| (s.mass_ratio - 1.0).abs()), false, m10, &[Fragment, Shrunken], false, false),
+        e("structure.extent_ratio (distance from 1)", |v: &VariantScores| structure(v, |s| (s.extent_ratio - 1.0).abs()), false, m10, &[Fragment, Shrunken], false, false),
+        e("structure.free_boundary", |v: &VariantScores| structure(v, |s| s.free_boundary), false, |ex| {
+            structure(ex, |s| crate::level::structure::StructureParams::default().free_boundary_limit(s.free_boundary) - s.free_boundary)
+        }, &[Fragment, Torn], false, false),
+        e("colour.fscore", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.fscore), true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
+        e("colour.precision", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.precision), true, m10, &[WashedOut, ShuffledColours, Untrained], false, true),
+        e("colour.coverage", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.coverage), true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
     ]
 }
 
@@ -384,6 +547,45 @@ pub fn check(rows: &[VariantScores], colourful: bool) -> Vec<CheckResult> {
                 });
             }
         }
+    }
+    out.extend(check_flags(rows));
+    out
+}
+
+/// The flags each rung must (or must not) get: the structural rungs their
+/// own fault, the exemplar the near-copy flag and no broken one, the rungs
+/// that change only the finest level's geometry or colours no broken flag
+/// (their structure is the exemplar's).
+pub fn check_flags(rows: &[VariantScores]) -> Vec<CheckResult> {
+    use crate::level::structure::Flag;
+    use Rung::*;
+    let expected: [(Rung, Option<Flag>, &str); 8] = [
+        (Exemplar, Some(Flag::NearCopy), "flagged near_copy, nothing broken"),
+        (Fragment, Some(Flag::Fragment), "flagged fragment"),
+        (Torn, Some(Flag::Torn), "flagged torn"),
+        (Shrunken, Some(Flag::Shrunken), "flagged shrunken"),
+        (SmoothWeak, None, "nothing broken"),
+        (WashedOut, None, "nothing broken"),
+        (ShuffledColours, None, "nothing broken"),
+        (Blob, None, "nothing broken"),
+    ];
+    let top = rows.iter().find(|v| v.name == Exemplar.name()).and_then(|v| v.structure.as_ref());
+    let mut out = Vec::new();
+    for (rung, flag, requirement) in expected {
+        let Some(s) = rows.iter().find(|v| v.name == rung.name()).and_then(|v| v.structure.as_ref()) else { continue };
+        let ok = match (rung, flag) {
+            (Exemplar, Some(f)) => s.flags.contains(&f) && s.whole(),
+            (_, Some(f)) => s.flags.contains(&f),
+            (_, None) => s.whole(),
+        };
+        out.push(CheckResult {
+            metric: format!("structure.flags [{}]", s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")),
+            rung: rung.name().into(),
+            exemplar: top.map_or(f64::NAN, |t| t.score),
+            value: s.score,
+            requirement: requirement.into(),
+            ok,
+        });
     }
     out
 }

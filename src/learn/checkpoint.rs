@@ -45,6 +45,11 @@ pub struct TrainState {
     pub seconds: f64,
     pub finished: bool,
     pub note: String,
+    /// [`crate::learn::schedule::TRAINING_PARAMETERISATION`] of the program
+    /// that trained it (empty: before it was recorded); sampling refuses
+    /// weights trained under another.
+    #[serde(default)]
+    pub parameterisation: String,
 }
 
 /// The training state recorded for `level` in `dir`, if one is there and reads.

@@ -3,10 +3,18 @@
 //! 1. Level 0: the dense box of the exemplar's level 0, resized per axis by
 //!    `extent` around its centre (the anisotropic control), filled with N(0, 1);
 //!    the reverse process from t = 1 with `level0_steps` steps; prune (mask > 0
-//!    kept, mask set to 1).
+//!    kept, mask set to 1). With `level0_candidates` > 1, up to that many
+//!    level-0 shapes are drawn, each from its own noise, and the first whose
+//!    structure against the exemplar's level 0 ([`crate::level::structure`])
+//!    scores at least `level0_min_structure` is kept (else the best): no
+//!    variant starts from a tiny blob or three pieces.
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
 //!    process from there with `upper_steps` steps; prune.
+//!
+//! Every clean estimate the network makes is clamped per channel to what the
+//! features can be ([`clamp_to_feature_ranges`]) before the sampler steps
+//! with it; the last step's rule is [`FinalStep`].
 //! 3. Every stage's pruned grid is returned as a [`Level`] in the exemplar's frame,
 //!    so a caller can stop, edit a level and continue from it.
 //!
@@ -27,12 +35,13 @@ use glam::IVec3;
 use tch::{Device, Kind, Tensor};
 
 use crate::config::Config;
-use crate::learn::schedule::{reverse_times, Sampler, Schedule};
+use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Schedule, TRAINING_PARAMETERISATION};
+use crate::level::structure::{Structure, StructureParams, StructureScores};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
 use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
-use crate::learn::sparse::SparseTensor;
+use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
 use crate::learn::seed::{derive_seed, Stream};
 
@@ -61,6 +70,7 @@ pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -
     let mut diffusion = Vec::with_capacity(levels);
     let mut upsamplers = Vec::with_capacity(levels);
     for l in 0..levels {
+        check_parameterisation(dir, l)?;
         let mut d = new_diffusion(&config.model, l, device)?;
         // The weights' moving average where training kept one.
         let p = if config.train.ema_decay > 0.0 { diffusion_ema_checkpoint(dir, l) } else { diffusion_checkpoint(dir, l) };
@@ -82,6 +92,24 @@ pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -
         }
     }
     Ok(Models { config: config.clone(), device, diffusion, upsamplers })
+}
+
+/// Refuses a level whose recorded training parameterisation is not this
+/// program's (weights trained to predict something else, or under another
+/// schedule or noise, would sample garbage without a word).
+fn check_parameterisation(dir: &Path, level: usize) -> Result<()> {
+    let path = crate::learn::checkpoint::state_path(dir, level);
+    let Some(state) = crate::learn::checkpoint::read_state(dir, level) else {
+        return Err(Error::file(&path, format!("no training state for level {level}: train it first")));
+    };
+    if state.parameterisation != TRAINING_PARAMETERISATION {
+        let was = if state.parameterisation.is_empty() { "an earlier parameterisation (not recorded)" } else { state.parameterisation.as_str() };
+        return Err(Error::file(
+            &path,
+            format!("level {level} was trained under {was}, this program samples \"{TRAINING_PARAMETERISATION}\": train it again"),
+        ));
+    }
+    Ok(())
 }
 
 /// Freshly initialised networks for levels `0..levels` (libtorch's generator
@@ -119,6 +147,12 @@ pub struct SampleOptions {
     pub upper_steps: usize,
     /// Upper levels start from U_l(...) noised to this time.
     pub upper_t_max: f64,
+    /// The last reverse step's rule.
+    pub final_step: FinalStep,
+    /// Level-0 shapes drawn per variant at most, and the structure score one
+    /// must reach to be kept (see the module documentation).
+    pub level0_candidates: usize,
+    pub level0_min_structure: f64,
 }
 
 impl SampleOptions {
@@ -134,6 +168,9 @@ impl SampleOptions {
             level0_steps: config.sample.level0_steps,
             upper_steps: config.sample.upper_steps,
             upper_t_max: config.train.upper_t_max,
+            final_step: config.sample.final_step,
+            level0_candidates: config.sample.level0_candidates,
+            level0_min_structure: config.sample.level0_min_structure,
         }
     }
 }
@@ -195,10 +232,20 @@ pub fn sample(
         }
     }
     let box0 = level0_box(exemplar0, opts.extent)?;
+    let exemplar0_structure = Structure::of(exemplar0);
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
-                let job = OneVariant { models, frame, last, box0, sampler: opts.sampler, schedule: Schedule::default(), seed: variant_seed(opts.seed, i) };
+                let job = OneVariant {
+                    models,
+                    frame,
+                    last,
+                    box0,
+                    sampler: opts.sampler,
+                    schedule: Schedule::default(),
+                    seed: variant_seed(opts.seed, i),
+                    exemplar0: (exemplar0, &exemplar0_structure),
+                };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
             .collect()
@@ -217,20 +264,7 @@ pub fn variant_seed(run_seed: u64, index: usize) -> u64 {
 /// global generator, of the batch and of the device, so a variant's noise is
 /// the same wherever and with whatever else it is sampled.
 fn gaussian(rows: usize, seed: u64, level: usize, step: usize, device: Device) -> Tensor {
-    let mut rng = crate::util::rng::Rng::new(derive_seed(seed, level as u64, Stream::SamplingStep, step as u64));
-    let n = rows * FEATURE_CHANNELS;
-    let mut v = Vec::with_capacity(n + 1);
-    while v.len() < n {
-        // Box-Muller: two normals from two uniforms in (0, 1].
-        let u1 = 1.0 - rng.uniform();
-        let u2 = rng.uniform();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let a = std::f64::consts::TAU * u2;
-        v.push((r * a.cos()) as f32);
-        v.push((r * a.sin()) as f32);
-    }
-    v.truncate(n);
-    Tensor::from_slice(&v).view([rows as i64, FEATURE_CHANNELS as i64]).to_device(device)
+    crate::learn::seed::standard_normal(rows, FEATURE_CHANNELS, derive_seed(seed, level as u64, Stream::SamplingStep, step as u64), device)
 }
 
 /// Everything one variant's coarse-to-fine pass needs.
@@ -242,21 +276,78 @@ struct OneVariant<'a> {
     sampler: Sampler,
     schedule: Schedule,
     seed: u64,
+    /// The exemplar's level 0 and its structure (the level-0 rejection).
+    exemplar0: (&'a Level, &'a Structure),
+}
+
+/// The seed of level-0 candidate `k` of a variant (candidate 0 is the
+/// variant's own seed: without rejection, nothing changes).
+fn candidate_seed(seed: u64, k: usize) -> u64 {
+    if k == 0 {
+        seed
+    } else {
+        derive_seed(seed, k as u64, Stream::Level0Candidate, 0)
+    }
 }
 
 impl OneVariant<'_> {
+    /// Level 0 from the noise of `seed`, pruned.
+    fn level0(&self, resolution0: u32, seed: u64, opts: &SampleOptions) -> Result<SparseTensor> {
+        let (lo, size) = self.box0;
+        let bx = SparseGrid::full_box(resolution0, lo, size)?;
+        let noise = gaussian(bx.len(), seed, 0, 0, self.models.device);
+        let x = SparseTensor::new(Arc::new(bx), noise)?;
+        Ok(self.reverse(0, x, 1.0, opts.level0_steps, seed, opts.final_step)?.prune_by_mask()?)
+    }
+
+    /// Level 0 of this variant: the first of `level0_candidates` shapes whose
+    /// structure score reaches `level0_min_structure`, else the best.
+    fn chosen_level0(&self, resolution0: u32, opts: &SampleOptions) -> Result<(SparseTensor, Level)> {
+        let (ex_level, ex_structure) = self.exemplar0;
+        let params = StructureParams::default();
+        let mut best: Option<(f64, SparseTensor, Level)> = None;
+        let candidates = opts.level0_candidates.max(1);
+        for k in 0..candidates {
+            let x = self.level0(resolution0, candidate_seed(self.seed, k), opts)?;
+            let level = x.to_level(0, self.frame)?;
+            if candidates == 1 {
+                return Ok((x, level));
+            }
+            let score = if level.is_empty() {
+                0.0
+            } else {
+                StructureScores::new(&level, &Structure::of(&level), ex_level, ex_structure, &params).score
+            };
+            log::debug!("level 0 candidate {k}: structure {score:.3}");
+            let pass = score >= opts.level0_min_structure;
+            if best.as_ref().is_none_or(|b| score > b.0) {
+                best = Some((score, x, level));
+            }
+            if pass {
+                if k > 0 {
+                    log::info!("level 0: candidate {k} kept (structure {score:.3}), {k} rejected");
+                }
+                break;
+            }
+            if k + 1 == candidates {
+                log::warn!(
+                    "level 0: none of {candidates} candidates reached structure {:.2}: the best ({:.3}) is kept",
+                    opts.level0_min_structure,
+                    best.as_ref().map_or(0.0, |b| b.0)
+                );
+            }
+        }
+        let (_, x, level) = best.expect("at least one candidate");
+        Ok((x, level))
+    }
+
     fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
         let dev = self.models.device;
         let mut out = Vec::new();
         let (mut cur, first) = match from {
             None => {
-                let (lo, size) = self.box0;
-                let bx = SparseGrid::full_box(resolution0, lo, size)?;
-                let noise = gaussian(bx.len(), self.seed, 0, 0, dev);
-                let x = SparseTensor::new(Arc::new(bx), noise)?;
-                let x = self.reverse(0, x, 1.0, opts.level0_steps)?;
-                let pruned = x.prune_by_mask()?;
-                out.push(pruned.to_level(0, self.frame)?);
+                let (pruned, level) = self.chosen_level0(resolution0, opts)?;
+                out.push(level);
                 (pruned, 1)
             }
             Some(level) => {
@@ -281,21 +372,22 @@ impl OneVariant<'_> {
             let u = up.net.forward_t(&cur, false)?;
             let eps = gaussian(u.len(), self.seed, l, 0, dev);
             let x = u.with_feats(self.schedule.add_noise(&u.feats, opts.upper_t_max, &eps))?;
-            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps)?;
+            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps, self.seed, opts.final_step)?;
             cur = x.prune_by_mask()?;
             out.push(cur.to_level(l, self.frame)?);
         }
         Ok(out)
     }
 
-    /// The reverse process of level `l` from `t_max` to 0 in `steps` steps.
-    fn reverse(&self, l: usize, mut x: SparseTensor, t_max: f64, steps: usize) -> Result<SparseTensor> {
+    /// The reverse process of level `l` from `t_max` to 0 in `steps` steps,
+    /// its noise from `seed`; every clean estimate clamped per channel.
+    fn reverse(&self, l: usize, mut x: SparseTensor, t_max: f64, steps: usize, seed: u64, final_step: FinalStep) -> Result<SparseTensor> {
         let net = &self.models.diffusion[l].net;
         let times = reverse_times(t_max, steps);
         for (k, w) in times.windows(2).enumerate() {
-            let x0_hat = net.forward_at(&x, w[0], false)?;
-            let noise = gaussian(x.len(), self.seed, l, k + 1, self.models.device);
-            let next = self.sampler.step(&self.schedule, &x.feats, &x0_hat.feats, w[0], w[1], &noise);
+            let x0_hat = clamp_to_feature_ranges(&net.forward_at(&x, w[0], false)?.feats);
+            let noise = gaussian(x.len(), seed, l, k + 1, self.models.device);
+            let next = reverse_step(self.sampler, final_step, &self.schedule, &x.feats, &x0_hat, w[0], w[1], &noise);
             x = x.with_feats(next)?;
         }
         Ok(x)

@@ -8,6 +8,20 @@
 
 use tch::Tensor;
 
+/// How every network is taught: the schedule, the prediction target, where
+/// the training noise comes from and the times each level sees. Recorded in
+/// every level's training state (`level_K_state.json`) and part of the
+/// training stage's digest, so weights trained under another
+/// parameterisation are never silently reused: sampling refuses them.
+pub const TRAINING_PARAMETERISATION: &str = "schedule=cosine-log-snr(s=0.008,clamp=1e-5); target=x0; \
+     noise=per-step-splitmix64-box-muller; t=[0,1] at level 0, [0,upper_t_max] above";
+
+/// How sampling turns a prediction into a step: the clean estimate clamped
+/// per channel to the features' ranges
+/// ([`crate::learn::sparse::clamp_to_feature_ranges`]), and the final step's
+/// rule ([`FinalStep`], a setting). Part of the sampling stage's digest.
+pub const SAMPLING_PARAMETERISATION: &str = "x0=clamped-per-channel(offset 0.5, normal 1, colour [0,1], mask 1)";
+
 /// The continuous cosine schedule (Nichol & Dhariwal) in log-SNR form, as the
 /// released code uses it: log SNR(t) = -log(cos((t+s)/(1+s) * pi/2)^-2 - 1),
 /// clamped so that it stays finite at both ends. Training noises with it and
@@ -16,7 +30,8 @@ use tch::Tensor;
 pub struct Schedule {
     /// The offset s (0.008).
     pub offset: f64,
-    /// Lower clamp of cos^-2 - 1 (1e-5: log-SNR at most ~11.5 at t = 0).
+    /// Lower clamp of cos^-2 - 1 (1e-5: log-SNR at most ~11.5; the offset keeps
+    /// t = 0 below it: log-SNR(0) = 8.8, alpha(0) = 0.99992, sigma(0) = 0.0125).
     pub clamp: f64,
 }
 
@@ -116,17 +131,50 @@ impl std::fmt::Display for Sampler {
     }
 }
 
+/// The rule of the last reverse step (to t = 0): `sample.final_step`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum FinalStep {
+    /// The (clamped) clean prediction itself, as the released code ends: no
+    /// noise is added at the end, and nothing is scaled by alpha(0).
+    #[default]
+    Prediction,
+    /// The sampler's own update to t = 0, like every other step: the clamped
+    /// schedule has alpha(0) = 0.99992 and sigma(0) = 0.0125, so DDPM adds a
+    /// last bit of noise and both scale the features by alpha(0).
+    Update,
+}
+
+impl FinalStep {
+    pub fn is_default(&self) -> bool {
+        *self == FinalStep::default()
+    }
+}
+
+/// One reverse step from `t` to `s`, the last one (s = 0) by `final_step`.
+#[allow(clippy::too_many_arguments)]
+pub fn reverse_step(
+    sampler: Sampler,
+    final_step: FinalStep,
+    schedule: &Schedule,
+    x_t: &Tensor,
+    x0_hat: &Tensor,
+    t: f64,
+    s: f64,
+    noise: &Tensor,
+) -> Tensor {
+    if s <= 0.0 && final_step == FinalStep::Prediction {
+        return x0_hat.shallow_clone();
+    }
+    sampler.step(schedule, x_t, x0_hat, t, s, noise)
+}
+
 impl Sampler {
-    /// One reverse step. `noise` is a fresh N(0,1) tensor like `x_t`; DDIM
-    /// ignores it (it is still drawn, so a seed gives the same stream).
-    ///
-    /// Both return the clean prediction itself on the last step (s = 0): the
-    /// clamped schedule has alpha(0) = 0.99996, not 1, and scaling the result
-    /// by it would shrink every feature slightly.
+    /// One reverse step by the sampler's update (at every s, 0 included: see
+    /// [`reverse_step`] for the last one). `noise` is a fresh N(0,1) tensor
+    /// like `x_t`; DDIM ignores it (it is still drawn, so a seed gives the
+    /// same stream).
     pub fn step(&self, schedule: &Schedule, x_t: &Tensor, x0_hat: &Tensor, t: f64, s: f64, noise: &Tensor) -> Tensor {
-        if s <= 0.0 {
-            return x0_hat.shallow_clone();
-        }
         match self {
             Sampler::Ddpm => {
                 let (lt, ls) = (schedule.log_snr(t), schedule.log_snr(s));
@@ -198,11 +246,27 @@ mod tests {
             let mut x = sch.add_noise(&x0, times[0], &eps);
             for w in times.windows(2) {
                 let noise = Tensor::zeros_like(&x);
-                x = sampler.step(&sch, &x, &x0, w[0], w[1], &noise);
+                x = reverse_step(sampler, FinalStep::Prediction, &sch, &x, &x0, w[0], w[1], &noise);
             }
             let d = (&x - &x0).abs().max().double_value(&[]);
             assert!(d < 1e-4, "{sampler}: {d}");
         }
+    }
+
+    #[test]
+    fn the_final_update_scales_by_alpha_zero() {
+        // The sampler's own last update lands within sigma(0) of x0, scaled by
+        // alpha(0) < 1; the prediction rule lands on x0 itself.
+        let sch = Schedule::default();
+        let x0 = Tensor::from_slice(&[1.0f32, -1.0]);
+        let x_t = sch.add_noise(&x0, 0.05, &Tensor::from_slice(&[0.3f32, 0.3]));
+        let zero = Tensor::zeros_like(&x0);
+        let upd = reverse_step(Sampler::Ddim, FinalStep::Update, &sch, &x_t, &x0, 0.05, 0.0, &zero);
+        let pred = reverse_step(Sampler::Ddim, FinalStep::Prediction, &sch, &x_t, &x0, 0.05, 0.0, &zero);
+        assert_eq!(Vec::<f32>::try_from(&pred).unwrap(), vec![1.0, -1.0]);
+        let d = (&upd - &x0).abs().max().double_value(&[]);
+        let (a0, s0) = sch.alpha_sigma(0.0);
+        assert!(d > 1e-6 && d < (1.0 - a0) + 2.0 * s0, "{d}");
     }
 
     #[test]

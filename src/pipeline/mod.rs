@@ -719,6 +719,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
             name: r.name().into(),
             finest: l[l.len() - 1].clone(),
             coarsest: l[0].clone(),
+            structure: crate::level::structure::structure_level(l).cloned(),
             mesh: None,
         })
         .collect();

@@ -10,6 +10,7 @@ use super::detail::{DetailScores, Variation};
 use super::local_patches::{best_patch_matches, ExemplarPatches, LpParams, LpScores, PatchMatches};
 use super::occupancy::{diversity, same_lattice, Occupancy};
 use super::point_distances::chamfer;
+use crate::level::structure::{Flag, Structure, StructureParams, StructureScores};
 use crate::level::Level;
 
 /// Scores of one variant (or one rung of the degradation ladder) against the
@@ -37,8 +38,13 @@ pub struct VariantScores {
     pub coverage_22: LpScores,
     /// Surface detail of the finest level against the exemplar's.
     pub detail: DetailScores,
-    /// Colour patches of the finest level against the exemplar's.
-    pub colour: ColourScores,
+    /// Colour patches of the finest level against the exemplar's; None (not
+    /// applicable) when the exemplar has one colour: nothing to compare.
+    pub colour: Option<ColourScores>,
+    /// The shape as a whole at the structure level (64^3) against the
+    /// exemplar's, with its flags; None when not measured.
+    #[serde(default)]
+    pub structure: Option<StructureScores>,
     /// Chamfer distance of the level-0 point set to the exemplar's, normalised
     /// units (bounding-box diagonal 2); None when not measured.
     pub coarse_chamfer: Option<f64>,
@@ -49,6 +55,25 @@ pub struct VariantScores {
 pub struct EvalParams {
     pub lp: LpParams,
     pub colour: ColourParams,
+    pub structure: StructureParams,
+}
+
+/// Below this RMS colour spread (RGB units) an exemplar has one colour, and
+/// the colour measures are not applicable.
+pub const ONE_COLOUR_SPREAD: f64 = 0.02;
+
+/// The structural flags of a set, for reading diversity per variant.
+#[derive(serde::Serialize, Clone, Debug, PartialEq, Default)]
+pub struct StructureSummary {
+    /// Resolution of the level the structure was measured at.
+    pub resolution: u32,
+    /// Variants with no flag that says broken (fragment, shrunken, pieces, torn).
+    pub whole: usize,
+    pub scored: usize,
+    /// Variants flagged as near copies of the exemplar.
+    pub near_copies: usize,
+    /// Each flagged variant with its flags.
+    pub flagged: Vec<(String, Vec<Flag>)>,
 }
 
 /// Coverage of the exemplar by the variants as a set: an exemplar patch
@@ -73,6 +98,8 @@ pub struct EvalReport {
     pub diversity: f64,
     /// None with fewer than two variants (nothing a set adds).
     pub set_coverage: Option<SetCoverage>,
+    /// None when no structure level was given.
+    pub structure: Option<StructureSummary>,
 }
 
 /// One shape to evaluate: its occupancy on the evaluation lattice and on the
@@ -84,6 +111,9 @@ pub struct ShapeInput<'a> {
     pub occupancy_22: &'a Occupancy,
     pub finest: &'a Level,
     pub coarse_points: Option<&'a [Vec3]>,
+    /// The level the structure is measured at (64^3, or the finest level
+    /// below it), if any.
+    pub structure_level: Option<&'a Level>,
 }
 
 /// What makes a voxelisation unusable for comparison, with the shape's name.
@@ -136,6 +166,8 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
     );
     let ex_detail = Variation::of(exemplar.finest);
     let ex_colour = ColourPatches::of(exemplar.finest);
+    let colourful = colour::spread(&exemplar.finest.colours) > ONE_COLOUR_SPREAD;
+    let ex_structure = exemplar.structure_level.map(|l| (l, Structure::of(l)));
     let mut cover_sets: Option<(PatchMatches, PatchMatches)> = None;
     let mut scores = Vec::with_capacity(variants.len());
     for v in variants {
@@ -162,7 +194,13 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
             precision_22: precision_22.summary(lp.threshold),
             coverage_22: cover_22.summary(lp.threshold),
             detail: DetailScores::new(&Variation::of(v.finest), &ex_detail),
-            colour: colour::colour_scores(&ColourPatches::of(v.finest), &ex_colour, &params.colour),
+            colour: colourful.then(|| colour::colour_scores(&ColourPatches::of(v.finest), &ex_colour, &params.colour)),
+            structure: match (&ex_structure, v.structure_level) {
+                (Some((el, es)), Some(vl)) if vl.resolution == el.resolution => {
+                    Some(StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure))
+                }
+                _ => None,
+            },
             coarse_chamfer: cd,
         });
         cover_sets = Some(match cover_sets {
@@ -176,6 +214,22 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
         patch_22: b.summary(lp.threshold),
     });
     Ok(EvalReport::new(params.clone(), scores, diversity(&occs), set_coverage))
+}
+
+impl StructureSummary {
+    /// The flags of the variants that have structure scores; None if none has.
+    pub fn of(variants: &[VariantScores]) -> Option<Self> {
+        let scored: Vec<(&str, &StructureScores)> =
+            variants.iter().filter_map(|v| v.structure.as_ref().map(|s| (v.name.as_str(), s))).collect();
+        let first = scored.first()?;
+        Some(StructureSummary {
+            resolution: first.1.resolution,
+            whole: scored.iter().filter(|(_, s)| s.whole()).count(),
+            scored: scored.len(),
+            near_copies: scored.iter().filter(|(_, s)| s.flags.contains(&Flag::NearCopy)).count(),
+            flagged: scored.iter().filter(|(_, s)| !s.flags.is_empty()).map(|(n, s)| (n.to_string(), s.flags.clone())).collect(),
+        })
+    }
 }
 
 /// Mean of JSON values leaf by leaf: numbers averaged (integers stay
@@ -227,7 +281,12 @@ impl EvalReport {
             }
         };
         mean.name = "mean".into();
-        EvalReport { parameters, variants, mean, diversity, set_coverage }
+        // Flags are per variant: the mean has none.
+        if let Some(s) = mean.structure.as_mut() {
+            s.flags.clear();
+        }
+        let structure = StructureSummary::of(&variants);
+        EvalReport { parameters, variants, mean, diversity, set_coverage, structure }
     }
 
     /// A plain-text table for the terminal: the headline figures; the JSON
@@ -235,17 +294,21 @@ impl EvalReport {
     pub fn table(&self) -> String {
         let width = self.variants.iter().map(|v| v.name.chars().count()).max().unwrap_or(0).max(7);
         let mut s = format!(
-            "{:<width$}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>9}\n",
-            "", "LP-IoU", "LP-F", "cover", "cover", "detail", "sharp", "colour", "colour", "chamfer0"
+            "{:<width$}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>9}  {:>6}  {}\n",
+            "", "LP-IoU", "LP-F", "cover", "cover", "detail", "sharp", "colour", "colour", "chamfer0", "struct", "flags"
         );
         s += &format!(
-            "{:<width$}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>9}\n",
-            "variant", "", ">0.95", "IoU", "IoU 22", "W1 deg", "ratio", "F", "cover", ""
+            "{:<width$}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>7}  {:>9}  {:>6}\n",
+            "variant", "", ">0.95", "IoU", "IoU 22", "W1 deg", "ratio", "F", "cover", "", "score"
         );
         let row = |v: &VariantScores| {
             let cd = v.coarse_chamfer.map_or("-".to_string(), |c| format!("{c:.4}"));
+            let colour = |f: fn(&ColourScores) -> f64| v.colour.as_ref().map_or("n/a".to_string(), |c| format!("{:.3}", f(c)));
+            let (score, flags) = v.structure.as_ref().map_or(("-".to_string(), String::new()), |s| {
+                (format!("{:.3}", s.score), s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(","))
+            });
             format!(
-                "{:<width$}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.2}  {:>7.3}  {:>7.3}  {:>7.3}  {:>9}\n",
+                "{:<width$}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.2}  {:>7.3}  {:>7}  {:>7}  {:>9}  {:>6}  {}\n",
                 v.name,
                 v.lp_iou,
                 v.lp_fscore_above_95,
@@ -253,15 +316,20 @@ impl EvalReport {
                 v.coverage_22.lp_iou,
                 v.detail.w1_deg,
                 v.detail.rms_ratio,
-                v.colour.fscore,
-                v.colour.coverage,
-                cd
+                colour(|c| c.fscore),
+                colour(|c| c.coverage),
+                cd,
+                score,
+                flags
             )
+            .trim_end()
+            .to_string()
+                + "\n"
         };
         for v in &self.variants {
             s += &row(v);
         }
-        s += &"-".repeat(width + 83);
+        s += &"-".repeat(width + 91);
         s += "\n";
         s += &row(&self.mean);
         let n = self.variants.len();
@@ -272,9 +340,20 @@ impl EvalReport {
                 c.patch_11.lp_iou, c.patch_22.lp_iou, c.patch_11.lp_fscore_above
             );
         }
+        if let Some(st) = &self.structure {
+            s += &format!(
+                "structure at {r}^3: {} of {} whole, {} near copies of the exemplar\n",
+                st.whole,
+                st.scored,
+                st.near_copies,
+                r = st.resolution
+            );
+        }
         s += "LP: the variant's 11^3 patches best-matched in the exemplar; cover: the exemplar's matched in the variant\n";
         s += "(22: on the half-resolution lattice); detail: neighbour-normal angles vs the exemplar's (W1, RMS ratio);\n";
-        s += "colour: colour patches matched both ways (F-score, coverage); chamfer0: level-0 points, normalised units\n";
+        s += "colour: colour patches matched both ways (F-score, coverage; n/a: a one-colour exemplar); chamfer0: level-0 points,\n";
+        s += "normalised units; struct: the shape as a whole vs the exemplar at the structure level (1 = its structure),\n";
+        s += "flags: fragment, shrunken, pieces, torn (not whole), near_copy\n";
         s
     }
 }
@@ -292,15 +371,8 @@ impl VariantScores {
             precision_22: lp,
             coverage_22: lp,
             detail: DetailScores { w1_deg: 0.0, rms_ratio: 0.0, mean_deg: 0.0, rms_deg: 0.0, sharp_fraction: 0.0 },
-            colour: ColourScores {
-                precision: 0.0,
-                coverage: 0.0,
-                fscore: 0.0,
-                distance_to_exemplar: 0.0,
-                distance_from_exemplar: 0.0,
-                sliced_wasserstein: 0.0,
-                spread_ratio: 0.0,
-            },
+            colour: None,
+            structure: None,
             coarse_chamfer: None,
         }
     }
@@ -323,6 +395,7 @@ mod tests {
         let mut b = scores("variant_b", 0.5, None);
         b.coverage.patches = 999;
         let r = EvalReport::new(EvalParams::default(), vec![a, b], 0.3, None);
+        assert!(r.structure.is_none(), "no structure measured");
         assert!((r.mean.lp_iou - 0.7).abs() < 1e-12 && r.mean.coarse_chamfer == Some(0.01));
         assert_eq!(r.mean.coverage.patches, 1000, "integer figures stay integers (rounded)");
         let t = r.table();
@@ -370,7 +443,7 @@ mod tests {
         let shifted = vec![Vec3::new(0.0, 0.1, 0.0), Vec3::new(1.0, 0.1, 0.0)];
         let (exh, v1h, parth) = (halve(&ex), halve(&v1), halve(&part));
         let (lex, lv1, lpart) = (level_of(&ex), level_of(&v1), level_of(&part));
-        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c };
+        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None };
         let r = evaluate(
             &shape("exemplar", &ex, &exh, &lex, Some(&pts)),
             &[
@@ -403,13 +476,13 @@ mod tests {
         let full = Occupancy { bits: full.bits.iter().map(|&w| w & last_word_mask(16)).collect(), ..full };
         let empty = Occupancy::empty(ex.dims);
         let l = level_of(&ex);
-        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None };
+        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None };
         assert!(matches!(check_shape(&shape(&empty)), Err(DegenerateShape::NoSurface(_))));
         let e = check_shape(&shape(&full)).unwrap_err();
         assert!(matches!(e, DegenerateShape::Filled(..)) && e.to_string().contains("fills 100%"), "{e}");
         assert!(check_shape(&shape(&ex)).is_ok());
         let empty_level = Level { resolution: 16, ..Default::default() };
-        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None };
+        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None };
         assert!(matches!(check_shape(&s), Err(DegenerateShape::EmptyLevel(_))));
     }
 }

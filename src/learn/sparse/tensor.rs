@@ -11,6 +11,37 @@ pub fn colour_from_network(s: f32) -> f32 {
     (s / 2.0 + 1.0) / 2.0
 }
 
+/// The range each channel of a feature row can take, on the networks' scale:
+/// offsets within the voxel ([-0.5, 0.5] voxels), unit normals ([-1, 1] per
+/// component), colours in [0, 1] ([-2, 2] after [`colour_to_network`]), the
+/// mask ([-1, 1]). (low, high) per channel, in storage order.
+pub fn feature_ranges() -> ([f32; FEATURE_CHANNELS], [f32; FEATURE_CHANNELS]) {
+    let mut lo = [0f32; FEATURE_CHANNELS];
+    let mut hi = [0f32; FEATURE_CHANNELS];
+    for (ch, (l, h)) in [
+        (Channel::Offset, (-0.5, 0.5)),
+        (Channel::Normal, (-1.0, 1.0)),
+        (Channel::Colour, (colour_to_network(0.0), colour_to_network(1.0))),
+        (Channel::Mask, (-1.0, 1.0)),
+    ] {
+        for k in ch.start()..ch.start() + ch.width() {
+            lo[k] = l;
+            hi[k] = h;
+        }
+    }
+    (lo, hi)
+}
+
+/// `feats` ([N, 10]) clamped per channel to [`feature_ranges`]: what a clean
+/// grid can hold, so a sampler never steps towards an offset outside its
+/// voxel, a colour brighter than white or a mask beyond +-1.
+pub fn clamp_to_feature_ranges(feats: &Tensor) -> Tensor {
+    let (lo, hi) = feature_ranges();
+    let opts = (feats.kind(), feats.device());
+    let lo = Tensor::from_slice(&lo).to_kind(opts.0).to_device(opts.1).unsqueeze(0);
+    let hi = Tensor::from_slice(&hi).to_kind(opts.0).to_device(opts.1).unsqueeze(0);
+    feats.maximum(&lo).minimum(&hi)
+}
 
 /// Features on a sparse grid: row `i` of `feats` (`[N, C]`) is voxel `i` of `grid`.
 #[derive(Debug)]

@@ -128,6 +128,7 @@ fn starting_state(job: &TrainJob, digest: &str) -> Result<TrainState> {
         config_digest: digest.to_string(),
         full_config_digest: job.config.digest(),
         note: "Adam moments are not checkpointed; they restart on resume".into(),
+        parameterisation: crate::learn::schedule::TRAINING_PARAMETERISATION.into(),
         ..Default::default()
     };
     let sp = state_path(job.out_dir, level);
@@ -268,7 +269,8 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
             let (x0, t_rows) = make_batch(&mut rng)?;
             let t_rows = Tensor::from_slice(&t_rows).to_device(device);
             opt.set_lr(lr(step, diff_total, tc.lr));
-            let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip)?;
+            let noise_seed = derive_seed(tc.seed, level as u64, Stream::TrainingNoise, step as u64);
+            let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip, noise_seed)?;
             if let Some(e) = ema.borrow_mut().as_mut() {
                 e.update();
             }
@@ -415,15 +417,19 @@ impl TrainingData {
 }
 
 /// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`):
-/// noise, forward, MSE to x0, backward, clipped step; returns the loss.
+/// noise (drawn from `noise_seed` alone, not from libtorch's global
+/// generator), forward, MSE to x0, backward, clipped step; returns the loss.
 pub fn diffusion_step(
     net: &DiffusionNet,
     opt: &mut tch::nn::Optimizer,
     x0: &SparseTensor,
     t_rows: &Tensor,
     clip: f64,
+    noise_seed: u64,
 ) -> Result<f64> {
-    let eps = x0.feats.randn_like();
+    let size = x0.feats.size();
+    let eps = crate::learn::seed::standard_normal(size[0] as usize, size[1] as usize, noise_seed, x0.feats.device())
+        .to_kind(x0.feats.kind());
     let x_t = x0.with_feats(Schedule::default().add_noise_rows(&x0.feats, t_rows, &eps))?;
     let pred = net.forward_t(&x_t, t_rows, true)?;
     let loss = mse(&pred.feats, &x0.feats);

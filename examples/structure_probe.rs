@@ -1,0 +1,55 @@
+//! The structure of variants at every coarse level against the exemplar's
+//! (shapeshifter::level::structure): the figures the level-0 rejection and
+//! the eval flags are thresholded on, one row per variant and level, to tune
+//! them against what the contact sheet shows.
+//!
+//! cargo run --release --example structure_probe -- RUN/exemplar RUN/variants/*
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use shapeshifter::level::structure::{Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
+
+/// Prints mass and extent ratios, pieces, free-boundary shares, copy F-score,
+/// score and flags per variant and level (16^3 .. 64^3).
+#[derive(Parser, Debug)]
+struct Args {
+    /// An encoded exemplar folder (manifest.json and level files).
+    exemplar: PathBuf,
+    /// Variant folders (level_K.vdb files).
+    variants: Vec<PathBuf>,
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    let (_, levels) = shapeshifter::level::dataset::read(&args.exemplar)?;
+    let params = StructureParams::default();
+    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "copyF", "score");
+    for dir in &args.variants {
+        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        for ex in levels.iter().filter(|l| l.resolution <= STRUCTURE_RESOLUTION) {
+            let path = dir.join(format!("level_{}.vdb", ex.index));
+            let Ok((v, _)) = shapeshifter::io::vdb::read_level(&path) else {
+                println!("{name:<14} {:>4} missing", ex.resolution);
+                continue;
+            };
+            let s = StructureScores::new(&v, &Structure::of(&v), ex, &Structure::of(ex), &params);
+            if std::env::var("PROBE_RAW").is_ok() { eprintln!("raw enclosure {} vs {}", Structure::of(&v).enclosure, Structure::of(ex).enclosure); }
+            println!(
+                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3}  {}",
+                ex.resolution,
+                s.mass_ratio,
+                s.extent_ratio,
+                s.pieces,
+                s.exemplar_pieces,
+                s.free_boundary,
+                s.exemplar_free_boundary,
+                s.enclosure_ratio,
+                s.copy_fscore,
+                s.score,
+                s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,483 @@
+//! The structure of a shape at a coarse level: how much surface there is, how
+//! far it reaches, in how many pieces, and how much of it is a free edge
+//! (a wall end, the rim of a hole). Local-patch measures cannot see these
+//! faults: every patch of a half tower, a torn roof or a shrunken copy exists
+//! somewhere on the exemplar. Compared with the exemplar's own structure at
+//! the same level, they flag the variants a user would throw away
+//! ([`StructureScores`]); sampling uses the same comparison at level 0 to
+//! reject broken coarse shapes before any finer level is made.
+//!
+//! Everything is measured on the surface voxels (mask > 0) of one level, in
+//! that level's voxels.
+
+use std::collections::{HashMap, HashSet};
+
+use glam::{IVec3, Vec3};
+use rayon::prelude::*;
+
+use super::Level;
+
+/// Resolution the structure of a shape is measured at: the coarse networks'
+/// finest level, where a wall's end, a missing limb or a hole through a roof
+/// is a few voxels across and nothing finer has been added.
+pub const STRUCTURE_RESOLUTION: u32 = 64;
+
+/// The finest of `levels` (coarsest first) of at most [`STRUCTURE_RESOLUTION`]^3.
+pub fn structure_level(levels: &[Level]) -> Option<&Level> {
+    levels.iter().filter(|l| l.resolution <= STRUCTURE_RESOLUTION).last()
+}
+
+/// A component smaller than this share of the shape's voxels is debris, not
+/// a piece (a stray stone does not make a tower "in two pieces").
+pub const PIECE_SHARE: f64 = 0.05;
+
+/// What one level's surface voxels look like as a whole.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Structure {
+    pub resolution: u32,
+    /// Surface voxels.
+    pub voxels: usize,
+    /// Bounding box of the surface voxels, voxels per axis (x, y, z).
+    pub extent: [u32; 3],
+    /// Sizes of the 26-connected components, largest first.
+    pub components: Vec<usize>,
+    /// Surface voxels on a free boundary ([`free_boundary`]).
+    pub free_boundary: usize,
+    /// Share of the directions from the voxels' centroid in which the
+    /// surface is met ([`enclosure`]).
+    pub enclosure: f64,
+}
+
+impl Structure {
+    /// The structure of `level`'s surface voxels.
+    pub fn of(level: &Level) -> Structure {
+        let active: Vec<usize> = (0..level.len()).filter(|&i| level.mask[i] > 0.0).collect();
+        let coords: Vec<IVec3> = active.iter().map(|&i| level.coords[i]).collect();
+        let extent = match (coords.iter().copied().reduce(IVec3::min), coords.iter().copied().reduce(IVec3::max)) {
+            (Some(lo), Some(hi)) => (hi - lo + IVec3::ONE).to_array().map(|v| v as u32),
+            _ => [0; 3],
+        };
+        Structure {
+            resolution: level.resolution,
+            voxels: coords.len(),
+            extent,
+            components: components(&coords),
+            free_boundary: free_boundary(level).iter().filter(|&&b| b).count(),
+            enclosure: enclosure(&coords),
+        }
+    }
+
+    /// Components holding at least [`PIECE_SHARE`] of the voxels.
+    pub fn pieces(&self) -> usize {
+        self.components.iter().filter(|&&c| c as f64 >= PIECE_SHARE * self.voxels as f64).count()
+    }
+
+    /// Share of the voxels in the largest component (0 when empty).
+    pub fn largest_share(&self) -> f64 {
+        self.components.first().map_or(0.0, |&c| c as f64 / self.voxels.max(1) as f64)
+    }
+
+    /// Share of the voxels on a free boundary (0 when empty).
+    pub fn free_boundary_share(&self) -> f64 {
+        self.free_boundary as f64 / self.voxels.max(1) as f64
+    }
+}
+
+/// Sizes of the 26-connected components of a voxel set, largest first.
+pub fn components(coords: &[IVec3]) -> Vec<usize> {
+    let index: HashMap<IVec3, usize> = coords.iter().enumerate().map(|(i, &c)| (c, i)).collect();
+    let mut seen = vec![false; coords.len()];
+    let mut sizes = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..coords.len() {
+        if seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start);
+        let mut size = 0;
+        while let Some(i) = stack.pop() {
+            size += 1;
+            for d in NEIGHBOURS_26 {
+                if let Some(&j) = index.get(&(coords[i] + d)) {
+                    if !seen[j] {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        sizes.push(size);
+    }
+    sizes.sort_unstable_by(|a, b| b.cmp(a));
+    sizes
+}
+
+const NEIGHBOURS_26: [IVec3; 26] = {
+    let mut out = [IVec3::ZERO; 26];
+    let mut k = 0;
+    let mut i = 0;
+    while i < 27 {
+        let d = IVec3::new(i % 3 - 1, (i / 3) % 3 - 1, i / 9 - 1);
+        if !(d.x == 0 && d.y == 0 && d.z == 0) {
+            out[k] = d;
+            k += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// Rays cast by [`enclosure`] (a Fibonacci sphere of directions).
+const ENCLOSURE_RAYS: usize = 2048;
+
+/// How much of the view from inside the shape its surface fills: the share
+/// of [`ENCLOSURE_RAYS`] directions, evenly spread over the sphere, in which a
+/// ray from the voxels' centroid meets a surface voxel or passes within one
+/// voxel of one (so a shell with gaps between its voxels does not leak). A
+/// whole tower surrounds its centre all round but for its top and its door; a
+/// ring with one side gone, a wall standing alone or a roof with a hole lets
+/// the rays through there. 0 for no voxels.
+pub fn enclosure(coords: &[IVec3]) -> f64 {
+    if coords.is_empty() {
+        return 0.0;
+    }
+    let set: HashSet<IVec3> = coords.iter().copied().collect();
+    let lo = coords.iter().copied().reduce(IVec3::min).expect("not empty") - IVec3::ONE;
+    let hi = coords.iter().copied().reduce(IVec3::max).expect("not empty") + IVec3::ONE;
+    let centre = coords.iter().fold(Vec3::ZERO, |a, c| a + c.as_vec3()) / coords.len() as f32 + Vec3::splat(0.5);
+    let reach = (hi - lo).as_vec3().length() + 2.0;
+    let near = |p: Vec3| {
+        let c = p.floor().as_ivec3();
+        set.contains(&c) || NEIGHBOURS_26.iter().any(|&d| set.contains(&(c + d)))
+    };
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    let hits = (0..ENCLOSURE_RAYS)
+        .into_par_iter()
+        .filter(|&k| {
+            let z = 1.0 - 2.0 * (k as f32 + 0.5) / ENCLOSURE_RAYS as f32;
+            let r = (1.0 - z * z).sqrt();
+            let a = golden * k as f32;
+            let dir = Vec3::new(r * a.cos(), r * a.sin(), z);
+            // Half-voxel steps from one voxel out of the centre (the centroid
+            // of a shell lies inside it, where no surface is).
+            let mut t = 1.0;
+            while t < reach {
+                if near(centre + dir * t) {
+                    return true;
+                }
+                t += 0.5;
+            }
+            false
+        })
+        .count();
+    hits as f64 / ENCLOSURE_RAYS as f64
+}
+
+/// Directions around a voxel's normal in which a neighbour is looked for.
+const SECTORS: usize = 8;
+/// A voxel is on a free boundary when this many consecutive sectors (of
+/// [`SECTORS`], 45 degrees each: 135 degrees) hold no neighbour.
+const OPEN_SECTORS: usize = 3;
+
+/// Per voxel of `level` (in row order; false for inactive voxels): whether its
+/// surface point lies on a free boundary of the surface. The neighbours are
+/// the surface points of the active voxels within 2 voxels (the 5^3 window)
+/// on the same side (normals less than 90 degrees apart) and near the tangent
+/// plane (within 1 voxel of it), 0.5 to 2.9 voxels away along it. Their
+/// directions in the tangent plane are binned into 8 sectors; where 3
+/// consecutive sectors are empty, half or more of the voxel's surroundings
+/// hold no surface: a wall's end, a hole's rim, the edge of an open sheet. A
+/// voxel inside a surface has neighbours all round; a sharp crease keeps its
+/// neighbours on both faces (within the window, near the plane of either).
+pub fn free_boundary(level: &Level) -> Vec<bool> {
+    let index: HashMap<IVec3, usize> =
+        (0..level.len()).filter(|&i| level.mask[i] > 0.0).map(|i| (level.coords[i], i)).collect();
+    let point = |i: usize| level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i];
+    (0..level.len())
+        .into_par_iter()
+        .map(|i| {
+            if level.mask[i] <= 0.0 {
+                return false;
+            }
+            let Some(n) = level.normals[i].try_normalize() else { return false };
+            let u = n.any_orthonormal_vector();
+            let w = n.cross(u);
+            let p = point(i);
+            let mut filled = [false; SECTORS];
+            for dz in -2..=2 {
+                for dy in -2..=2 {
+                    for dx in -2..=2 {
+                        let Some(&j) = index.get(&(level.coords[i] + IVec3::new(dx, dy, dz))) else { continue };
+                        if j == i || level.normals[j].dot(n) <= 0.0 {
+                            continue;
+                        }
+                        let d = point(j) - p;
+                        let along = d.dot(n);
+                        let t = d - along * n;
+                        let r = t.length();
+                        if along.abs() > 1.0 || !(0.5..=2.9).contains(&r) {
+                            continue;
+                        }
+                        let a = t.dot(w).atan2(t.dot(u)).rem_euclid(std::f32::consts::TAU);
+                        filled[((a / std::f32::consts::TAU * SECTORS as f32) as usize).min(SECTORS - 1)] = true;
+                    }
+                }
+            }
+            // The longest cyclic run of empty sectors.
+            let (mut run, mut best) = (0, 0);
+            for k in 0..2 * SECTORS {
+                if filled[k % SECTORS] {
+                    run = 0;
+                } else {
+                    run += 1;
+                    best = best.max(run);
+                }
+            }
+            best >= OPEN_SECTORS
+        })
+        .collect()
+}
+
+/// Thresholds of the structural flags, in the figures' own units. Chosen on
+/// the degradation ladder and on sampled variants (README, "Whole shapes").
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct StructureParams {
+    /// A variant with less surface than this share of the exemplar's (or
+    /// more than its inverse) is a fragment (or an overgrowth).
+    pub min_mass_ratio: f64,
+    /// The bounding box along some axis shorter than this share of the
+    /// exemplar's: shrunken.
+    pub min_extent_ratio: f64,
+    /// More free-boundary share than `free_boundary_ratio` times the
+    /// exemplar's plus `free_boundary_slack`: torn (or open: a wall's end).
+    pub free_boundary_ratio: f64,
+    pub free_boundary_slack: f64,
+    /// Enclosure below this share of the exemplar's: open.
+    pub min_enclosure_ratio: f64,
+    /// Boundary F-score (1-voxel tolerance) to the exemplar at or above
+    /// which a variant is a near copy.
+    pub copy_fscore: f64,
+}
+
+impl Default for StructureParams {
+    fn default() -> Self {
+        StructureParams { min_mass_ratio: 0.8, min_extent_ratio: 0.8, free_boundary_ratio: 1.25, free_boundary_slack: 0.002, min_enclosure_ratio: 0.85, copy_fscore: 0.9 }
+    }
+}
+
+impl StructureParams {
+    /// The free-boundary share above which a shape is torn, given the
+    /// exemplar's.
+    pub fn free_boundary_limit(&self, exemplar_share: f64) -> f64 {
+        self.free_boundary_ratio * exemplar_share + self.free_boundary_slack
+    }
+}
+
+/// What a structural comparison found wrong with a shape.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Flag {
+    /// Much less surface than the exemplar (a large part missing), or far more.
+    Fragment,
+    /// Shorter than the exemplar along some axis.
+    Shrunken,
+    /// More pieces than the exemplar (components of 5% or more).
+    Pieces,
+    /// Far more free edges than the exemplar: holes, wall ends.
+    Torn,
+    /// Surrounds much less of its centre than the exemplar does: a side
+    /// gone, a wall standing alone, a hole through a roof.
+    Open,
+    /// Nearly the exemplar itself.
+    NearCopy,
+}
+
+impl Flag {
+    pub fn name(self) -> &'static str {
+        match self {
+            Flag::Fragment => "fragment",
+            Flag::Shrunken => "shrunken",
+            Flag::Pieces => "pieces",
+            Flag::Torn => "torn",
+            Flag::Open => "open",
+            Flag::NearCopy => "near_copy",
+        }
+    }
+    /// Whether the flag says the shape is not whole (a near copy is whole,
+    /// just not new).
+    pub fn broken(self) -> bool {
+        !matches!(self, Flag::NearCopy)
+    }
+}
+
+/// A shape's structure against the exemplar's at the same level.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StructureScores {
+    /// Resolution of the level compared.
+    pub resolution: u32,
+    /// Surface voxels, variant / exemplar.
+    pub mass_ratio: f64,
+    /// Bounding box, variant / exemplar, along the axis where it is smallest.
+    pub extent_ratio: f64,
+    /// Pieces (components of 5% or more) of the variant, and of the exemplar.
+    pub pieces: usize,
+    pub exemplar_pieces: usize,
+    /// Share of the surface voxels on a free boundary, and the exemplar's.
+    pub free_boundary: f64,
+    pub exemplar_free_boundary: f64,
+    /// Enclosure ([`enclosure`]), variant / exemplar.
+    pub enclosure_ratio: f64,
+    /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
+    /// (1: the exemplar's surface, voxel for voxel).
+    pub copy_fscore: f64,
+    /// One figure in [0, 1], 1 = the exemplar's structure: the worst of the
+    /// mass, extent, piece, free-boundary and enclosure terms
+    /// ([`StructureScores::new`]).
+    pub score: f64,
+    pub flags: Vec<Flag>,
+}
+
+impl StructureScores {
+    /// `shape` (structure `s` of level `shape_level`) against the exemplar
+    /// (`e` of `exemplar_level`, the same resolution). The score's terms,
+    /// each 1 at the exemplar: mass min(r, 1/r); extent min over axes of
+    /// min(r, 1/r); pieces (largest share of the variant / the exemplar's,
+    /// at most 1); free boundary (the torn limit
+    /// [`StructureParams::free_boundary_limit`] / the variant's share, at most
+    /// 1: below 1 exactly when flagged torn); enclosure (variant / exemplar, at most 1).
+    pub fn new(shape_level: &Level, s: &Structure, exemplar_level: &Level, e: &Structure, p: &StructureParams) -> Self {
+        let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
+        let sym = |r: f64| if r > 0.0 { r.min(1.0 / r) } else { 0.0 };
+        let mass_ratio = ratio(s.voxels as f64, e.voxels as f64);
+        let axis_ratios: Vec<f64> = (0..3).map(|a| ratio(s.extent[a] as f64, e.extent[a] as f64)).collect();
+        let extent_ratio = axis_ratios.iter().copied().fold(f64::INFINITY, f64::min);
+        let (fb, efb) = (s.free_boundary_share(), e.free_boundary_share());
+        let enclosure_ratio = ratio(s.enclosure, e.enclosure);
+        let terms = [
+            sym(mass_ratio),
+            axis_ratios.iter().map(|&r| sym(r)).fold(1.0, f64::min),
+            (ratio(s.largest_share(), e.largest_share())).min(1.0),
+            if fb > 0.0 { (p.free_boundary_limit(efb) / fb).min(1.0) } else { 1.0 },
+            enclosure_ratio.min(1.0),
+        ];
+        let copy_fscore = tolerant_fscore(shape_level, exemplar_level);
+        let mut flags = Vec::new();
+        if mass_ratio < p.min_mass_ratio || mass_ratio > 1.0 / p.min_mass_ratio {
+            flags.push(Flag::Fragment);
+        }
+        if extent_ratio < p.min_extent_ratio {
+            flags.push(Flag::Shrunken);
+        }
+        if s.pieces() > e.pieces() {
+            flags.push(Flag::Pieces);
+        }
+        if fb > p.free_boundary_limit(efb) {
+            flags.push(Flag::Torn);
+        }
+        if enclosure_ratio < p.min_enclosure_ratio {
+            flags.push(Flag::Open);
+        }
+        if copy_fscore >= p.copy_fscore {
+            flags.push(Flag::NearCopy);
+        }
+        StructureScores {
+            resolution: s.resolution,
+            mass_ratio,
+            extent_ratio,
+            pieces: s.pieces(),
+            exemplar_pieces: e.pieces(),
+            free_boundary: fb,
+            exemplar_free_boundary: efb,
+            enclosure_ratio,
+            copy_fscore,
+            score: terms.iter().copied().fold(1.0, f64::min),
+            flags,
+        }
+    }
+
+    /// No flag that says the shape is broken.
+    pub fn whole(&self) -> bool {
+        !self.flags.iter().any(|f| f.broken())
+    }
+}
+
+/// F-score of two levels' surface voxels (same resolution) where a voxel
+/// counts as matched when the other set has a voxel within 1 voxel
+/// (Chebyshev): 1 for the same surface, low for a shape that is elsewhere.
+pub fn tolerant_fscore(a: &Level, b: &Level) -> f64 {
+    let set = |l: &Level| -> HashSet<IVec3> { (0..l.len()).filter(|&i| l.mask[i] > 0.0).map(|i| l.coords[i]).collect() };
+    let (sa, sb) = (set(a), set(b));
+    if sa.is_empty() || sb.is_empty() {
+        return 0.0;
+    }
+    let matched = |from: &HashSet<IVec3>, to: &HashSet<IVec3>| {
+        from.iter().filter(|&&c| to.contains(&c) || NEIGHBOURS_26.iter().any(|&d| to.contains(&(c + d)))).count() as f64
+            / from.len() as f64
+    };
+    let (precision, recall) = (matched(&sa, &sb), matched(&sb, &sa));
+    if precision + recall == 0.0 {
+        0.0
+    } else {
+        2.0 * precision * recall / (precision + recall)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The voxel shell of a sphere (or of its part where `keep` holds) at `res`.
+    fn sphere(res: u32, radius: f64, keep: impl Fn(Vec3) -> bool) -> Level {
+        let mut l = crate::testing::synthetic::sphere_levels(&[res], glam::DVec3::ZERO, radius).remove(0);
+        let pts: Vec<Vec3> = (0..l.len()).map(|i| l.point_normalised(i).as_vec3()).collect();
+        l.retain(|i| keep(pts[i]));
+        l
+    }
+
+    #[test]
+    fn a_closed_sphere_has_no_free_boundary_and_a_cut_one_has_a_rim() {
+        let whole = sphere(64, 0.7, |_| true);
+        let s = Structure::of(&whole);
+        assert_eq!(s.pieces(), 1);
+        assert!(s.free_boundary_share() < 0.01, "closed: {s:?}");
+        let half = sphere(64, 0.7, |p| p.x < 0.0);
+        let h = Structure::of(&half);
+        // The rim is a circle of radius 0.7 (~22 voxels): ~140 voxels.
+        assert!(h.free_boundary > 60 && h.free_boundary_share() > 0.02, "{h:?}");
+        assert!(s.enclosure > 0.99 && h.enclosure < 0.8, "enclosure {} {}", s.enclosure, h.enclosure);
+        let sc = StructureScores::new(&half, &h, &whole, &s, &StructureParams::default());
+        assert!(sc.flags.contains(&Flag::Fragment) && sc.flags.contains(&Flag::Shrunken), "{sc:?}");
+        assert!(sc.score < 0.6, "{sc:?}");
+        let same = StructureScores::new(&whole, &s, &whole, &s, &StructureParams::default());
+        assert_eq!((same.score, same.copy_fscore, same.flags.clone()), (1.0, 1.0, vec![Flag::NearCopy]));
+        assert!(same.whole());
+    }
+
+    #[test]
+    fn pieces_and_holes_are_seen() {
+        let whole = sphere(64, 0.7, |_| true);
+        let s = Structure::of(&whole);
+        // Two caps, apart: two pieces.
+        let caps = sphere(64, 0.7, |p| p.y.abs() > 0.3);
+        let c = Structure::of(&caps);
+        assert_eq!(c.pieces(), 2, "{c:?}");
+        let sc = StructureScores::new(&caps, &c, &whole, &s, &StructureParams::default());
+        assert!(sc.flags.contains(&Flag::Pieces), "{sc:?}");
+        // Holes: six discs of 0.2 (6.4 voxels) cut away at the poles of the
+        // axes, 12% of the surface; the rest in place.
+        let poles = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z].map(|a| a * 0.7);
+        let holes = sphere(64, 0.7, |p| poles.iter().all(|&c| c.distance(p) > 0.2));
+        let t = Structure::of(&holes);
+        let sc = StructureScores::new(&holes, &t, &whole, &s, &StructureParams::default());
+        assert!(sc.flags.contains(&Flag::Torn), "{sc:?}");
+        assert!(!sc.flags.contains(&Flag::Shrunken) && !sc.flags.contains(&Flag::Fragment), "{sc:?}");
+    }
+
+    #[test]
+    fn components_count_26_connected_sets() {
+        let c = [IVec3::ZERO, IVec3::ONE, IVec3::new(5, 5, 5), IVec3::new(5, 6, 5), IVec3::new(5, 7, 5)];
+        assert_eq!(components(&c), vec![3, 2]);
+        assert!(components(&[]).is_empty());
+    }
+}
