@@ -205,6 +205,12 @@ pub struct SampleConfig {
     pub level0_candidates: usize,
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub level0_min_structure: f64,
+    /// Coarse-to-fine passes per variant at most (1: one pass): until one
+    /// is whole (no fragment, shrunken, pieces, torn or open flag) and not a
+    /// near copy of the exemplar at the structure level (64^3); else the
+    /// best is kept.
+    #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
+    pub attempts: usize,
 }
 
 fn one_usize() -> usize {
@@ -389,6 +395,9 @@ impl Config {
         }
         if self.sample.level0_candidates == 0 || self.sample.level0_candidates > 64 {
             return Err(Error::Invalid("sample.level0_candidates must be in 1..=64".into()));
+        }
+        if self.sample.attempts == 0 || self.sample.attempts > 64 {
+            return Err(Error::Invalid("sample.attempts must be in 1..=64".into()));
         }
         if !(0.0..=1.0).contains(&self.sample.level0_min_structure) {
             return Err(Error::Invalid("sample.level0_min_structure must be in [0, 1]".into()));

@@ -41,6 +41,9 @@ fn tiny(over: &[&str]) -> Config {
         "train.upsampler_lr=3e-3",
         "sample.level0_steps=8",
         "sample.upper_steps=4",
+        // The profile's rejection, made cheap: two candidates, two attempts.
+        "sample.level0_candidates=2",
+        "sample.attempts=2",
         // f32: these tests compare runs bit for bit (bf16 has its own test)
         "train.bf16=false",
     ]
@@ -273,9 +276,11 @@ fn level0_rejection_keeps_the_best_candidate() {
     let dir = tempfile::tempdir().unwrap();
     let levels = trained(dir.path(), &config);
     let models = load_models(dir.path(), &config, 2, Device::Cpu).unwrap();
-    let opts = SampleOptions { stop_level: Some(0), ..SampleOptions::from_config(&config, 4, 3) };
+    let opts = SampleOptions { stop_level: Some(0), level0_candidates: 1, attempts: 1, ..SampleOptions::from_config(&config, 4, 3) };
     let plain = sample(&models, &levels, &opts, None).unwrap();
     let easy = sample(&models, &levels, &SampleOptions { level0_candidates: 4, level0_min_structure: 0.0, ..opts.clone() }, None).unwrap();
+    let one = sample(&models, &levels, &SampleOptions { level0_candidates: 1, level0_min_structure: 1.0, ..opts.clone() }, None).unwrap();
+    assert!(same(&plain, &one), "one candidate is no rejection, whatever the threshold");
     assert!(same(&plain, &easy), "a threshold the first candidate passes changed the variants");
     let hard = sample(&models, &levels, &SampleOptions { level0_candidates: 4, level0_min_structure: 1.0, ..opts.clone() }, None).unwrap();
     let ex = Structure::of(&levels[0]);

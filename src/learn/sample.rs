@@ -8,6 +8,10 @@
 //!    structure against the exemplar's level 0 ([`crate::level::structure`])
 //!    scores at least `level0_min_structure` is kept (else the best): no
 //!    variant starts from a tiny blob or three pieces.
+//!    With `attempts` > 1, the whole coarse-to-fine pass is repeated from
+//!    new level-0 noise until the variant is whole and not a near copy at the
+//!    structure level (64^3): the faults that level 0 cannot show yet (a
+//!    wall that breaks at 32^3) are caught where they appear.
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
 //!    process from there with `upper_steps` steps; prune.
@@ -153,6 +157,9 @@ pub struct SampleOptions {
     /// must reach to be kept (see the module documentation).
     pub level0_candidates: usize,
     pub level0_min_structure: f64,
+    /// Coarse-to-fine passes per variant at most, until one is whole and not
+    /// a near copy at the structure level (1: one pass, no check).
+    pub attempts: usize,
 }
 
 impl SampleOptions {
@@ -171,6 +178,7 @@ impl SampleOptions {
             final_step: config.sample.final_step,
             level0_candidates: config.sample.level0_candidates,
             level0_min_structure: config.sample.level0_min_structure,
+            attempts: config.sample.attempts,
         }
     }
 }
@@ -233,6 +241,7 @@ pub fn sample(
     }
     let box0 = level0_box(exemplar0, opts.extent)?;
     let exemplar0_structure = Structure::of(exemplar0);
+    let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
@@ -245,6 +254,7 @@ pub fn sample(
                     schedule: Schedule::default(),
                     seed: variant_seed(opts.seed, i),
                     exemplar0: (exemplar0, &exemplar0_structure),
+                    structure_reference: reference.as_ref().map(|(l, s)| (*l, s)),
                 };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
@@ -278,6 +288,17 @@ struct OneVariant<'a> {
     seed: u64,
     /// The exemplar's level 0 and its structure (the level-0 rejection).
     exemplar0: (&'a Level, &'a Structure),
+    /// The exemplar's structure level and its structure (the attempts).
+    structure_reference: Option<(&'a Level, &'a Structure)>,
+}
+
+/// The seed of attempt `a` of a variant (attempt 0 is the variant's own seed).
+fn attempt_seed(seed: u64, a: usize) -> u64 {
+    if a == 0 {
+        seed
+    } else {
+        derive_seed(seed, a as u64, Stream::StructureAttempt, 0)
+    }
 }
 
 /// The seed of level-0 candidate `k` of a variant (candidate 0 is the
@@ -302,13 +323,13 @@ impl OneVariant<'_> {
 
     /// Level 0 of this variant: the first of `level0_candidates` shapes whose
     /// structure score reaches `level0_min_structure`, else the best.
-    fn chosen_level0(&self, resolution0: u32, opts: &SampleOptions) -> Result<(SparseTensor, Level)> {
+    fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<(SparseTensor, Level)> {
         let (ex_level, ex_structure) = self.exemplar0;
         let params = StructureParams::default();
         let mut best: Option<(f64, SparseTensor, Level)> = None;
         let candidates = opts.level0_candidates.max(1);
         for k in 0..candidates {
-            let x = self.level0(resolution0, candidate_seed(self.seed, k), opts)?;
+            let x = self.level0(resolution0, candidate_seed(seed, k), opts)?;
             let level = x.to_level(0, self.frame)?;
             if candidates == 1 {
                 return Ok((x, level));
@@ -341,12 +362,62 @@ impl OneVariant<'_> {
         Ok((x, level))
     }
 
+    /// The variant: one coarse-to-fine pass from its seed, or with
+    /// `attempts` > 1 (and no level to continue from), passes from new
+    /// level-0 noise (attempt seeds) until one is whole at the structure
+    /// level and not a near copy of the exemplar there ([`StructureScores`]
+    /// flags); else the best (whole first, then not a copy, then by score).
     fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
+        let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
+        let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
+        let Some((ex_level, ex_structure)) = reference.filter(|_| attempts > 1) else {
+            return self.pass(self.seed, resolution0, opts, from);
+        };
+        let params = StructureParams::default();
+        let mut best: Option<((u8, u8, f64), Vec<Level>)> = None;
+        for a in 0..attempts {
+            let levels = self.pass(attempt_seed(self.seed, a), resolution0, opts, None)?;
+            let level = &levels[ex_level.index];
+            let rank = if level.is_empty() {
+                (0, 0, 0.0)
+            } else {
+                let s = StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, &params);
+                let copy = s.flags.contains(&crate::level::structure::Flag::NearCopy);
+                log::debug!("attempt {a}: structure {:.3} {:?}", s.score, s.flags);
+                (s.whole() as u8, (!copy) as u8, s.score)
+            };
+            let better = best.as_ref().is_none_or(|(r, _)| rank.partial_cmp(r) == Some(std::cmp::Ordering::Greater));
+            if rank.0 == 1 && rank.1 == 1 {
+                if a > 0 {
+                    log::info!("variant kept at attempt {a} (structure {:.3} at {}^3)", rank.2, ex_level.resolution);
+                }
+                return Ok(levels);
+            }
+            if better {
+                best = Some((rank, levels));
+            }
+        }
+        let (rank, levels) = best.expect("at least one attempt");
+        log::warn!(
+            "no attempt of {attempts} was whole and new at {}^3: the best kept ({}, structure {:.3})",
+            ex_level.resolution,
+            if rank.0 == 0 { "not whole" } else { "a near copy" },
+            rank.2
+        );
+        Ok(levels)
+    }
+
+    /// One coarse-to-fine pass: level 0 from `level0_seed`, the finer levels
+    /// from the variant's own seed (so continuing from an unedited level
+    /// reproduces the finer levels of the pass that made it, whichever
+    /// attempt that was).
+    fn pass(&self, level0_seed: u64, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
+        let seed = self.seed;
         let dev = self.models.device;
         let mut out = Vec::new();
         let (mut cur, first) = match from {
             None => {
-                let (pruned, level) = self.chosen_level0(resolution0, opts)?;
+                let (pruned, level) = self.chosen_level0(level0_seed, resolution0, opts)?;
                 out.push(level);
                 (pruned, 1)
             }
@@ -370,9 +441,9 @@ impl OneVariant<'_> {
                 .as_ref()
                 .ok_or_else(|| Error::Invalid(format!("level {l} has no upsampler")))?;
             let u = up.net.forward_t(&cur, false)?;
-            let eps = gaussian(u.len(), self.seed, l, 0, dev);
+            let eps = gaussian(u.len(), seed, l, 0, dev);
             let x = u.with_feats(self.schedule.add_noise(&u.feats, opts.upper_t_max, &eps))?;
-            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps, self.seed, opts.final_step)?;
+            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps, seed, opts.final_step)?;
             cur = x.prune_by_mask()?;
             out.push(cur.to_level(l, self.frame)?);
         }

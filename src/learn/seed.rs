@@ -26,6 +26,8 @@ pub enum Stream {
     Level0Candidate = 10,
     /// The noise eps of one diffusion training step.
     TrainingNoise = 11,
+    /// The seed of one more coarse-to-fine attempt of a variant.
+    StructureAttempt = 12,
 }
 
 /// SplitMix64 of the tuple (seed, index, stream, step): `index` is the level

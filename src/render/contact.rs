@@ -75,6 +75,9 @@ pub fn contact_sheet(entries: &[(String, &Level)], opts: &SheetOptions) -> Resul
     let mut sheet = RgbImage::from_pixel(w, h, SHEET_BG);
     for (k, ((name, _), set)) in entries.iter().zip(&sets).enumerate() {
         let (cx, cy) = (GAP + (k as u32 % cols) * cell_w, GAP + (k as u32 / cols) * cell_h);
+        // "name\nnote": the note (a variant's structure flags) in red at the
+        // foot of its full view.
+        let (name, note) = name.split_once('\n').unwrap_or((name.as_str(), ""));
         draw_text(&mut sheet, cx + 2, cy + 4, name, Rgb([30, 30, 30]));
         for (row, o) in [&base, &close].into_iter().enumerate() {
             let ty = cy + LABEL + row as u32 * (opts.tile + GAP);
@@ -89,6 +92,9 @@ pub fn contact_sheet(entries: &[(String, &Level)], opts: &SheetOptions) -> Resul
             }
             if k == 0 {
                 frame(&mut sheet, cx, ty, opts.tile, FRAME);
+            }
+            if row == 0 && !note.is_empty() {
+                draw_text(&mut sheet, cx + 6, ty + opts.tile - 22, note, Rgb([200, 30, 30]));
             }
         }
     }
@@ -150,6 +156,7 @@ fn glyph(ch: char) -> [u8; 7] {
         '_' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x1F],
         '-' => [0x00, 0x00, 0x00, 0x1F, 0x00, 0x00, 0x00],
         '.' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x0C, 0x0C],
+        ',' => [0x00, 0x00, 0x00, 0x00, 0x0C, 0x04, 0x08],
         ' ' => [0; 7],
         _ => [0x1F, 0x11, 0x11, 0x11, 0x11, 0x11, 0x1F],
     }
