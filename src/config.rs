@@ -206,9 +206,8 @@ pub struct SampleConfig {
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub level0_min_structure: f64,
     /// Coarse-to-fine passes per variant at most (1: one pass): until one
-    /// is whole (no fragment, shrunken, pieces, torn or open flag) and not a
-    /// near copy of the exemplar at the structure level (64^3); else the
-    /// best is kept.
+    /// is whole (no fragment, shrunken, pieces, torn or open flag) at the
+    /// structure level (64^3); else the best is kept.
     #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
     pub attempts: usize,
 }
@@ -530,6 +529,11 @@ mod tests {
             "train.upper_iterations=1000",
             "train.upsampler_iterations=400",
             "train.bf16=false",
+            // The sampling rejection settings at their defaults are not
+            // written: a configuration recorded before they existed.
+            "sample.level0_candidates=1",
+            "sample.level0_min_structure=0.0",
+            "sample.attempts=1",
         ]
         .map(String::from)
         .to_vec();

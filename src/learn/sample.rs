@@ -9,8 +9,8 @@
 //!    scores at least `level0_min_structure` is kept (else the best): no
 //!    variant starts from a tiny blob or three pieces.
 //!    With `attempts` > 1, the whole coarse-to-fine pass is repeated from
-//!    new level-0 noise until the variant is whole and not a near copy at the
-//!    structure level (64^3): the faults that level 0 cannot show yet (a
+//!    new level-0 noise until the variant is whole at the structure level
+//!    (64^3): the faults that level 0 cannot show yet (a
 //!    wall that breaks at 32^3) are caught where they appear.
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
@@ -365,8 +365,8 @@ impl OneVariant<'_> {
     /// The variant: one coarse-to-fine pass from its seed, or with
     /// `attempts` > 1 (and no level to continue from), passes from new
     /// level-0 noise (attempt seeds) until one is whole at the structure
-    /// level and not a near copy of the exemplar there ([`StructureScores`]
-    /// flags); else the best (whole first, then not a copy, then by score).
+    /// level ([`StructureScores`] flags); else the best (whole first, then
+    /// not a near copy, then by score).
     fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
         let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
@@ -387,7 +387,11 @@ impl OneVariant<'_> {
                 (s.whole() as u8, (!copy) as u8, s.score)
             };
             let better = best.as_ref().is_none_or(|(r, _)| rank.partial_cmp(r) == Some(std::cmp::Ordering::Greater));
-            if rank.0 == 1 && rank.1 == 1 {
+            // Whole is the criterion. Near copies are not rejected: on the
+            // ruined tower that traded copies for towers split open at 64^3,
+            // which the flags call whole (README, "Whole shapes"); the copy
+            // rank only orders the fallback.
+            if rank.0 == 1 {
                 if a > 0 {
                     log::info!("variant kept at attempt {a} (structure {:.3} at {}^3)", rank.2, ex_level.resolution);
                 }
@@ -399,9 +403,8 @@ impl OneVariant<'_> {
         }
         let (rank, levels) = best.expect("at least one attempt");
         log::warn!(
-            "no attempt of {attempts} was whole and new at {}^3: the best kept ({}, structure {:.3})",
+            "no attempt of {attempts} was whole at {}^3: the best kept (structure {:.3})",
             ex_level.resolution,
-            if rank.0 == 0 { "not whole" } else { "a near copy" },
             rank.2
         );
         Ok(levels)

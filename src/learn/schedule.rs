@@ -19,8 +19,10 @@ pub const TRAINING_PARAMETERISATION: &str = "schedule=cosine-log-snr(s=0.008,cla
 /// How sampling turns a prediction into a step: the clean estimate clamped
 /// per channel to the features' ranges
 /// ([`crate::learn::sparse::clamp_to_feature_ranges`]), and the final step's
-/// rule ([`FinalStep`], a setting). Part of the sampling stage's digest.
-pub const SAMPLING_PARAMETERISATION: &str = "x0=clamped-per-channel(offset 0.5, normal 1, colour [0,1], mask 1)";
+/// rule ([`FinalStep`], a setting), and what `sample.attempts` keeps. Part of
+/// the sampling stage's digest: a change resamples.
+pub const SAMPLING_PARAMETERISATION: &str =
+    "x0=clamped-per-channel(offset 0.5, normal 1, colour [0,1], mask 1); attempts-keep=first-whole-at-64";
 
 /// The continuous cosine schedule (Nichol & Dhariwal) in log-SNR form, as the
 /// released code uses it: log SNR(t) = -log(cos((t+s)/(1+s) * pi/2)^-2 - 1),
