@@ -262,7 +262,7 @@ pub struct StructureParams {
 
 impl Default for StructureParams {
     fn default() -> Self {
-        StructureParams { min_mass_ratio: 0.8, min_extent_ratio: 0.8, free_boundary_ratio: 1.25, free_boundary_slack: 0.002, min_enclosure_ratio: 0.85, copy_fscore: 0.95 }
+        StructureParams { min_mass_ratio: 0.8, min_extent_ratio: 0.8, free_boundary_ratio: 1.15, free_boundary_slack: 0.002, min_enclosure_ratio: 0.85, copy_fscore: 0.95 }
     }
 }
 
