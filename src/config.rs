@@ -257,6 +257,19 @@ impl Config {
             let off = toml::Value::try_from(crate::transfer::TransferConfig::default()).expect("serialises");
             table.insert("transfer".into(), off);
         }
+        // Settings not written at their defaults can still be set.
+        let defaults: [(&str, &str, toml::Value); 5] = [
+            ("sample", "final_step", toml::Value::String("prediction".into())),
+            ("sample", "level0_candidates", toml::Value::Integer(1)),
+            ("sample", "level0_min_structure", toml::Value::Float(0.0)),
+            ("sample", "attempts", toml::Value::Integer(1)),
+            ("train", "bf16", toml::Value::Boolean(false)),
+        ];
+        for (section, key, value) in defaults {
+            if let Some(sec) = table.get_mut(section).and_then(|s| s.as_table_mut()) {
+                sec.entry(key).or_insert(value);
+            }
+        }
         for o in overrides {
             apply_override(&mut table, o)?;
         }
@@ -515,6 +528,30 @@ mod tests {
             let e = Config::load("cpu", &[bad.into()]).unwrap_err().to_string();
             assert!(e.contains("transfer"), "{bad}: {e}");
         }
+    }
+
+    #[test]
+    fn settings_not_written_at_their_defaults_can_be_set() {
+        // The paper profile writes none of the rejection settings nor bf16.
+        let paper = Config::load("paper", &[]).unwrap();
+        assert!(!paper.to_toml().contains("attempts") && !paper.to_toml().contains("final_step"));
+        let set = paper
+            .with_overrides(&[
+                "sample.final_step=update".into(),
+                "sample.attempts=3".into(),
+                "sample.level0_candidates=4".into(),
+                "sample.level0_min_structure=0.7".into(),
+                "train.bf16=true".into(),
+            ])
+            .unwrap();
+        assert_eq!(set.sample.final_step, crate::learn::schedule::FinalStep::Update);
+        assert_eq!((set.sample.attempts, set.sample.level0_candidates, set.sample.level0_min_structure), (3, 4, 0.7));
+        assert!(set.train.bf16);
+        assert_eq!(paper.with_overrides(&[]).unwrap(), paper, "defaults filled in change nothing");
+        assert_eq!(paper.with_overrides(&[]).unwrap().digest(), paper.digest());
+        let e = paper.with_overrides(&["sample.final_step=halfway".into()]).unwrap_err().to_string();
+        assert!(e.contains("final_step") || e.contains("halfway"), "{e}");
+        assert!(paper.with_overrides(&["sample.attempts=0".into()]).is_err());
     }
 
     #[test]
