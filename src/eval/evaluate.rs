@@ -59,8 +59,8 @@ pub fn level_files(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
 }
 
 /// Reads a variant folder: the highest and lowest `level_K.vdb` present, the
-/// structure level (read upwards from the coarsest until one is finer than
-/// [`STRUCTURE_RESOLUTION`]: small files) and `mesh.ply` if there.
+/// structure level (read upwards from the coarsest until
+/// [`STRUCTURE_RESOLUTION`] is reached: small files) and `mesh.ply` if there.
 pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let levels = level_files(dir)?;
     let hi = &levels[levels.len() - 1];
@@ -68,9 +68,10 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let mut coarse_levels: Vec<Level> = Vec::new();
     for (_, path) in &levels[..levels.len() - 1] {
         let (level, _) = vdb::read_level(path)?;
-        let finer = level.resolution > STRUCTURE_RESOLUTION;
+        // Resolutions double per level: the next one is finer than needed.
+        let reached = level.resolution >= STRUCTURE_RESOLUTION;
         coarse_levels.push(level);
-        if finer {
+        if reached {
             break;
         }
     }

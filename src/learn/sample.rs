@@ -15,12 +15,12 @@
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
 //!    process from there with `upper_steps` steps; prune.
+//! 3. Every stage's pruned grid is returned as a [`Level`] in the exemplar's frame,
+//!    so a caller can stop, edit a level and continue from it.
 //!
 //! Every clean estimate the network makes is clamped per channel to what the
 //! features can be ([`clamp_to_feature_ranges`]) before the sampler steps
 //! with it; the last step's rule is [`FinalStep`].
-//! 3. Every stage's pruned grid is returned as a [`Level`] in the exemplar's frame,
-//!    so a caller can stop, edit a level and continue from it.
 //!
 //! Each variant is sampled alone, from its own seed ([`variant_seed`] of the run's
 //! seed and its index) and its own noise (drawn on the CPU from that seed, the
@@ -157,8 +157,8 @@ pub struct SampleOptions {
     /// must reach to be kept (see the module documentation).
     pub level0_candidates: usize,
     pub level0_min_structure: f64,
-    /// Coarse-to-fine passes per variant at most, until one is whole and not
-    /// a near copy at the structure level (1: one pass, no check).
+    /// Coarse-to-fine passes per variant at most, until one is whole at the
+    /// structure level (1: one pass, no check).
     pub attempts: usize,
 }
 
