@@ -9,6 +9,7 @@ const CPP_FILES: &[&str] = &[
     "cpp/mesh_io.cpp",
     "cpp/mesh_decimate.cpp",
     "cpp/vdb_io.cpp",
+    "cpp/vdb_guard.cpp",
     "cpp/vdb_points.cpp",
     "cpp/recon_poisson.cpp",
 ];
@@ -22,6 +23,17 @@ fn main() {
         // and ccache keeps the cost to the first build.
         .opt_level(2)
         .include("/usr/include/eigen3")
+        // One NDEBUG for every translation unit: the C++ files instantiate
+        // the same OpenMesh templates, and a macro that changes their bodies
+        // in some files and not others breaks the one definition rule.
+        // NDEBUG turns off OpenMesh's, Eigen's and Boost's debug assertions
+        // (a third of the decimater's time went to OpenMesh's property-name
+        // checks); CGAL_DEBUG keeps CGAL's preconditions and assertions,
+        // which throw (CGAL's default behaviour) and reach Rust as errors,
+        // where NDEBUG alone would make a violated precondition undefined
+        // behaviour.
+        .define("NDEBUG", None)
+        .define("CGAL_DEBUG", None)
         .define("CGAL_EIGEN3_ENABLED", None)
         .define("CGAL_LINKED_WITH_TBB", None)
         .flag_if_supported("-Wno-deprecated-declarations")
@@ -31,6 +43,13 @@ fn main() {
     // OpenMeshTools: the decimater's observer (cpp/mesh_decimate.cpp).
     for lib in ["openvdb", "tbb", "Imath-3_1", "OpenMeshCore", "OpenMeshTools", "mpfr", "gmp", "blosc"] {
         println!("cargo:rustc-link-lib={lib}");
+    }
+    // The .vdb probe program uses only cpp/vdb_guard.cpp, through a C entry
+    // point and not the library crate, so it links neither libtorch (whose
+    // start-up alone costs about 0.25 s per process) nor the bridge.
+    let out_dir = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
+    for arg in [format!("-L{out_dir}"), "-lshapeshifter_cpp".into(), "-lopenvdb".into(), "-ltbb".into(), "-lImath-3_1".into(), "-lblosc".into(), "-lstdc++".into()] {
+        println!("cargo:rustc-link-arg-bin=shapeshifter-vdb-probe={arg}");
     }
     println!("cargo:rerun-if-changed=src/io/ffi.rs");
     println!("cargo:rerun-if-changed=cpp");

@@ -22,10 +22,9 @@
 // Errors are thrown as std::runtime_error and reach Rust as `Err`.
 
 // OpenMesh's headers assert on every property access (comparing type names
-// as std::strings): with them the decimater spent a third of its time in
-// string compares and allocations. Off in this translation unit only; the
-// checks guard OpenMesh's own invariants, not our input (checked below).
-#define NDEBUG
+// as std::strings): NDEBUG, set for every translation unit by build.rs,
+// turns them off; they guard OpenMesh's own invariants, not our input
+// (checked below).
 
 // GCC 12 warns "may be used uninitialized" inside OpenMesh's property
 // containers: a false positive in library headers (see mesh_io.cpp).

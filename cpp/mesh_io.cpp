@@ -18,6 +18,9 @@
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
+#include <cerrno>
+#include <cstring>
+#include <fstream>
 #include <map>
 #include <mutex>
 #include <stdexcept>
@@ -127,10 +130,23 @@ MeshData read_mesh(rust::Str path) {
 void write_mesh(rust::Str path, const MeshData &data, bool binary) {
   silence_openmesh();
   std::lock_guard<std::mutex> lock(openmesh_io_mutex());
+  // The arrays are public fields on the Rust side: checked here, where an
+  // index past their end would read out of bounds.
+  const size_t nv = data.positions.size() / 3;
+  if (data.positions.size() % 3 != 0)
+    throw std::invalid_argument("mesh positions are not triples (" + std::to_string(data.positions.size()) + " values)");
+  if (!data.vertex_colours.empty() && data.vertex_colours.size() != data.positions.size())
+    throw std::invalid_argument("mesh has " + std::to_string(data.vertex_colours.size()) +
+                                " colour values for " + std::to_string(nv) + " vertices");
+  if (data.triangles.size() % 3 != 0)
+    throw std::invalid_argument("mesh triangle indices are not triples");
+  for (const auto i : data.triangles)
+    if (i >= nv)
+      throw std::invalid_argument("mesh triangle index " + std::to_string(i) + " past its " +
+                                  std::to_string(nv) + " vertices");
   TriMesh mesh;
   const bool vcol = !data.vertex_colours.empty();
   if (vcol) mesh.request_vertex_colors();
-  const size_t nv = data.positions.size() / 3;
   std::vector<TriMesh::VertexHandle> handles(nv);
   for (size_t i = 0; i < nv; ++i) {
     handles[i] = mesh.add_vertex(TriMesh::Point(
@@ -158,8 +174,22 @@ void write_mesh(rust::Str path, const MeshData &data, bool binary) {
   OpenMesh::IO::Options opt;
   if (vcol) opt += OpenMesh::IO::Options::VertexColor;
   if (binary) opt += OpenMesh::IO::Options::Binary;
-  if (!OpenMesh::IO::write_mesh(mesh, std::string(path), opt)) {
-    throw std::runtime_error("could not be written");
-  }
+  // Into a stream checked here: OpenMesh's file writer does not report a
+  // failed write (a full disk left a truncated file that looked written).
+  const std::string file(path);
+  const auto dot = file.rfind('.');
+  const std::string ext = dot == std::string::npos ? std::string() : file.substr(dot);
+  std::ofstream os(file, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
+  if (!os) throw std::runtime_error(std::string("cannot be created: ") + std::strerror(errno));
+  errno = 0;
+  const bool written = OpenMesh::IO::write_mesh(mesh, os, ext, opt);
+  os.flush();
+  const int flush_errno = errno;
+  const bool flushed = bool(os);
+  os.close();
+  if (!written) throw std::runtime_error("could not be written (OpenMesh has no writer for '" + ext + "')");
+  if (!flushed || os.fail())
+    throw std::runtime_error(std::string("could not be written: ") +
+                             std::strerror(flush_errno != 0 ? flush_errno : EIO));
 }
 } // namespace shapeshifter

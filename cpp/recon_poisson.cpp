@@ -25,11 +25,9 @@
 //
 // Units: `spacing` and `grid_cell` in world units.
 
-// CGAL, Eigen and Boost check assertions unless NDEBUG: this file is always
-// built as release code.
-#ifndef NDEBUG
-#define NDEBUG
-#endif
+// NDEBUG and CGAL_DEBUG come from build.rs for every translation unit: Eigen
+// and Boost without their debug assertions, CGAL's preconditions kept (they
+// throw, and the bridge turns that into an error).
 #include "shapeshifter/cpp/recon_poisson.h"
 #include "shapeshifter/src/io/ffi.rs.h"
 

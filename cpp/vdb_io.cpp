@@ -8,72 +8,21 @@
 #include "shapeshifter/cpp/vdb_io.h"
 #include "shapeshifter/src/io/ffi.rs.h"
 #include "shapeshifter/cpp/vdb_common.h"
+#include "shapeshifter/cpp/vdb_guard.h"
 
 #include <openvdb/io/File.h>
 #include <openvdb/io/GridDescriptor.h>
+#include <openvdb/io/Archive.h>
 
 #include <algorithm>
 #include <cerrno>
-#include <csignal>
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <unistd.h>
+#include <cstring>
 #include <vector>
 
 #include <cstdlib>
 #include <fstream>
 #include <new>
 #include <stdexcept>
-
-// Reading a damaged level file under a budget.
-//
-// Why: OpenVDB trusts the sizes a file declares. `readString` (grid names and
-// types in the grid descriptors, metadata names) and the string and unknown
-// metadata readers allocate and fill a declared 32-bit length before reading
-// it; a damaged type-name length in a 182 KB file cost 5-6 GB and 6-11 s before
-// failing (and the "unknown grid type" error then copied the name again).
-//
-// How: while OpenVDB parses, no single allocation on this thread may exceed the
-// cap below (a replaceable operator new that checks a thread-local limit, zero
-// everywhere else), so a declared length cannot allocate more than the file
-// could hold; the bad_alloc becomes a one-line error. (Parsing from a memory
-// stream that throws at its end, which would also stop OpenVDB's loops over
-// declared counts at the end of the bytes, was tried and dropped: OpenVDB's
-// readers are not exception-safe mid-node, and 5 of 150 damaged files then
-// ended in "double free or corruption".)
-namespace shapeshifter {
-namespace {
-thread_local std::size_t g_allocation_cap = 0; // 0: no cap (every other caller)
-
-// The cap for a file of `len` bytes: a legitimate read allocates blocks no
-// larger than the file itself (compressed chunks) or a few MB (node tables).
-struct AllocationCap {
-  explicit AllocationCap(std::size_t len) { g_allocation_cap = 8u * 1024 * 1024 + 2 * len; }
-  ~AllocationCap() { g_allocation_cap = 0; }
-  AllocationCap(const AllocationCap &) = delete;
-  AllocationCap &operator=(const AllocationCap &) = delete;
-};
-} // namespace
-} // namespace shapeshifter
-
-// The replaceable global allocation functions (the C++ standard lets a program
-// define them once); identical to the library's except for the cap check.
-void *operator new(std::size_t n) {
-  const std::size_t cap = shapeshifter::g_allocation_cap;
-  if (cap != 0 && n > cap) throw std::bad_alloc();
-  if (n == 0) n = 1;
-  for (;;) {
-    if (void *p = std::malloc(n)) return p;
-    std::new_handler handler = std::get_new_handler();
-    if (!handler) throw std::bad_alloc();
-    handler();
-  }
-}
-void *operator new[](std::size_t n) { return ::operator new(n); }
-void operator delete(void *p) noexcept { std::free(p); }
-void operator delete[](void *p) noexcept { std::free(p); }
-void operator delete(void *p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void *p, std::size_t) noexcept { std::free(p); }
 
 namespace shapeshifter {
 namespace {
@@ -144,6 +93,30 @@ Vec3fGrid::Ptr vector_grid(const char *name, const LevelData &level, const rust:
 }
 } // namespace
 
+namespace {
+// Writes grids exactly as openvdb::io::File::write does (a seekable archive:
+// grid offsets, so readers may load grids one at a time), into a stream this
+// code checks. Why: io::File neither checks its stream nor reports a failed
+// write, so on a full disk it returned normally and a truncated file was
+// renamed into place under its final name.
+class CheckedArchive : public openvdb::io::Archive {
+public:
+  void write_file(const std::string &file_name, const openvdb::GridPtrVec &grids) const {
+    std::ofstream os(file_name, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
+    if (!os) throw std::runtime_error(std::string("cannot be created: ") + std::strerror(errno));
+    errno = 0;
+    Archive::write(os, grids, /*seekable=*/true);
+    os.flush();
+    const int flush_errno = errno;
+    const bool flushed = bool(os);
+    os.close();
+    if (!flushed || os.fail())
+      throw std::runtime_error(std::string("could not be written: ") +
+                               std::strerror(flush_errno != 0 ? flush_errno : EIO));
+  }
+};
+} // namespace
+
 void write_level_file(rust::Str path, const LevelData &level, bool half_floats, bool volumes,
                       bool points) {
   ensure_openvdb();
@@ -186,188 +159,19 @@ void write_level_file(rust::Str path, const LevelData &level, bool half_floats, 
   }
 
   std::lock_guard<std::mutex> lock(vdb_file_mutex());
-  openvdb::io::File file{std::string(path)};
+  CheckedArchive archive;
   uint32_t compression = openvdb::io::COMPRESS_ACTIVE_MASK;
   compression |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
                                                              : openvdb::io::COMPRESS_ZIP;
-  file.setCompression(compression);
-  file.write(grids);
-  file.close();
+  archive.setCompression(compression);
+  archive.write_file(std::string(path), grids);
 }
-
-namespace {
-// Bytes of one value of a grid's value type as its root node stores it; 0 if
-// the type is not one we know (its root counts are then not checked).
-std::size_t value_bytes(const std::string &type) {
-  if (type == "float" || type == "int32" || type == "ptdataidx32") return 4;
-  if (type == "double" || type == "int64" || type == "ptdataidx64") return 8;
-  if (type == "vec3s" || type == "vec3i") return 12;
-  if (type == "vec3d") return 24;
-  if (type == "bool" || type == "mask") return 1;
-  return 0;
-}
-
-// Checks each grid's root-node counts before OpenVDB reads the tree.
-//
-// Why: RootNode::readTopology loops over the declared tile count (and child
-// count) without checking the stream: a tile count of 0xFFFFFFFF in a 182 KB
-// level file ran for minutes on reads that had already failed. Each tile needs
-// 12 bytes of coordinates, a value and an active flag, each child at least its
-// 12 bytes of coordinates, and all of it lies before the grid's buffers
-// (`blockPos`), so the counts are checked against those bytes. The walk uses
-// OpenVDB's own readers for the variable-sized parts (descriptors, metadata,
-// transform); where it cannot follow the file it stops and leaves the verdict
-// to OpenVDB's reader (still under the allocation cap).
-void check_root_counts(const std::string &file_name) {
-  std::ifstream is(file_name, std::ios::binary);
-  int64_t magic = 0;
-  uint32_t version = 0, major = 0, minor = 0;
-  is.read(reinterpret_cast<char *>(&magic), 8);
-  is.read(reinterpret_cast<char *>(&version), 4);
-  if (!is || magic != openvdb::OPENVDB_MAGIC ||
-      version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION)
-    return;
-  is.read(reinterpret_cast<char *>(&major), 4);
-  is.read(reinterpret_cast<char *>(&minor), 4);
-  char has_offsets = 0;
-  is.read(&has_offsets, 1);
-  is.ignore(36); // uuid
-  if (!is || !has_offsets) return;
-  openvdb::io::setVersion(is, openvdb::VersionId(major, minor), version);
-  openvdb::MetaMap().readMeta(is);
-  int32_t count = 0;
-  is.read(reinterpret_cast<char *>(&count), 4);
-  if (!is || count < 0) return;
-  std::vector<std::pair<openvdb::io::GridDescriptor, std::size_t>> grids;
-  for (int32_t i = 0; i < count && is; ++i) {
-    openvdb::io::GridDescriptor gd;
-    openvdb::GridBase::Ptr grid = gd.read(is);
-    if (!is || !grid) return;
-    grids.emplace_back(gd, value_bytes(grid->valueType()));
-    is.seekg(gd.getEndPos());
-  }
-  for (const auto &[gd, vbytes] : grids) {
-    if (gd.isInstance() || vbytes == 0) continue;
-    is.clear();
-    is.seekg(gd.getGridPos());
-    uint32_t compression = 0;
-    is.read(reinterpret_cast<char *>(&compression), 4);
-    openvdb::io::setDataCompression(is, compression);
-    openvdb::MetaMap().readMeta(is);
-    openvdb::math::Transform().read(is);
-    int32_t buffer_count = 0;
-    is.read(reinterpret_cast<char *>(&buffer_count), 4);
-    is.ignore(static_cast<std::streamsize>(vbytes)); // background
-    uint32_t tiles = 0, children = 0;
-    is.read(reinterpret_cast<char *>(&tiles), 4);
-    is.read(reinterpret_cast<char *>(&children), 4);
-    if (!is) return;
-    const std::streamoff at = is.tellg();
-    const std::streamoff room = gd.getBlockPos() - at;
-    const double need = double(tiles) * double(13 + vbytes) + double(children) * 12.0;
-    if (room < 0 || need > double(room))
-      throw std::runtime_error("grid '" + gd.gridName() + "' declares " + std::to_string(tiles) +
-                               " root tiles and " + std::to_string(children) +
-                               " child nodes, more than its " + std::to_string(std::max<std::streamoff>(room, 0)) +
-                               " bytes of topology can hold (damaged .vdb file)");
-  }
-}
-
-} // namespace
-
-namespace {
-// Parses the grids `names` of `file_name` (all grids if empty) in a forked
-// child first.
-//
-// Why: OpenVDB's readers assert (StreamCompression.cc: "uncompressedSize !=
-// 0"), segfault or corrupt the heap ("double free or corruption") on some
-// damaged files, in the original reader as much as here: 5 of 7000 damaged
-// level files in a campaign took `info` down, one of them `points` too. Nothing
-// outside the damaged bytes tells, so the parse is tried where a crash costs
-// nothing: the child only parses (no TBB, no logging, under the same
-// allocation cap) and leaves with _exit; a child killed by a signal becomes a
-// one-line error here, and a clean child lets the parse run in this process.
-// Cost: the file is parsed twice (about 0.1 s for the tower's 9 MB 256^3 level).
-void probe_parse(const std::string &file_name, const std::vector<std::string> &names) {
-  const pid_t pid = fork();
-  if (pid < 0) return; // cannot isolate: parse in-process, as before
-  if (pid == 0) {
-    // What the parse makes is not destroyed here: freeing a tree runs a TBB
-    // parallel_for, and TBB's scheduler, copied mid-state from a parent that
-    // has used it (a batch reading its second file), spins for ever in the
-    // child; the objects are left to _exit. (A parse that throws midway
-    // still frees its partial tree while unwinding: the time limit below
-    // catches that case.)
-    int code = 0;
-    try {
-      auto *file = new openvdb::io::File(file_name);
-      file->open(false);
-      auto *kept = new std::vector<openvdb::GridBase::Ptr>();
-      if (names.empty()) {
-        new openvdb::GridPtrVecPtr(file->getGrids());
-      } else {
-        for (const auto &name : names)
-          if (file->hasGrid(name)) kept->push_back(file->readGrid(name));
-      }
-    } catch (...) {
-      code = 1; // the parent's own parse reports the error
-    }
-    _exit(code);
-  }
-  // A child still busy after 10 s plus 1 s per 10 MB of file (a level file
-  // parses in well under a second per 10 MB) is stopped, and the parse goes
-  // on here as it would without the probe.
-  struct stat st {};
-  const long limit_ms = 10000 + (::stat(file_name.c_str(), &st) == 0 ? long(st.st_size / 10000) : 0);
-  int status = 0;
-  for (long waited_ms = 0;; waited_ms += 10) {
-    const pid_t r = waitpid(pid, &status, WNOHANG);
-    if (r == pid) break;
-    if (r < 0 && errno != EINTR) return;
-    if (waited_ms >= limit_ms) {
-      kill(pid, SIGKILL);
-      while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-      }
-      return;
-    }
-    usleep(10000);
-  }
-  if (WIFSIGNALED(status))
-    throw std::runtime_error("OpenVDB's reader crashed on it (signal " +
-                             std::to_string(WTERMSIG(status)) + "): damaged .vdb file");
-}
-} // namespace
-
-namespace {
-// Runs `read` (which opens `path` with openvdb::io::File) under the allocation
-// cap for a file of that size, and names what a failure means in the file's
-// terms.
-template <typename F> auto read_capped(rust::Str path, F read) -> decltype(read()) {
-  ensure_openvdb();
-  std::ifstream in(std::string(path), std::ios::binary | std::ios::ate);
-  if (!in) throw std::runtime_error("cannot be opened");
-  const std::streamoff len = in.tellg();
-  if (len < 0) throw std::runtime_error("cannot be read");
-  in.close();
-  std::lock_guard<std::mutex> lock(vdb_file_mutex());
-  try {
-    AllocationCap cap(static_cast<std::size_t>(len));
-    check_root_counts(std::string(path));
-    return read();
-  } catch (const std::bad_alloc &) {
-    throw std::runtime_error("declares a size larger than the file can hold (damaged .vdb file)");
-  } catch (const std::length_error &) {
-    throw std::runtime_error("declares a size larger than the file can hold (damaged .vdb file)");
-  }
-}
-} // namespace
 
 LevelData read_level_file(rust::Str path) {
   const std::string file_name(path);
   // Only the four grids a level needs (not the point grid): less of a damaged
   // file is parsed.
-  auto grids = read_capped(path, [&] {
-    probe_parse(file_name, {"mask", "P", "N", "Cd"});
+  auto grids = read_capped(std::string(path), [&] {
     openvdb::io::File file{file_name};
     file.open(false); // no delayed loading: a truncated file must fail here
     std::vector<openvdb::GridBase::Ptr> out;
@@ -404,10 +208,21 @@ LevelData read_level_file(rust::Str path) {
   auto pacc = P->getConstAccessor();
   auto nacc = N->getConstAccessor();
   auto cacc = Cd->getConstAccessor();
+  // The features come from P, N and Cd at the mask's voxels: a voxel the mask
+  // has and a feature grid lacks would read as the grid's background (a point
+  // at the origin), so it is refused; voxels only the feature grids have
+  // carry nothing the level uses and are counted (the caller warns).
+  const std::pair<const char *, decltype(pacc) *> features[] = {{"P", &pacc}, {"N", &nacc}, {"Cd", &cacc}};
   for (auto it = mask->cbeginValueOn(); it; ++it) {
     if (!it.isVoxelValue())
       throw std::runtime_error("has tiles in its mask grid; expected single voxels");
     const Coord ijk = it.getCoord();
+    for (const auto &[name, acc] : features) {
+      if (!acc->isValueOn(ijk))
+        throw std::runtime_error("voxel (" + std::to_string(ijk[0]) + "," + std::to_string(ijk[1]) +
+                                 "," + std::to_string(ijk[2]) + ") is active in grid 'mask' but not in '" +
+                                 name + "': its grids disagree (edited by another tool?)");
+    }
     for (int k = 0; k < 3; ++k) out.coords.push_back(ijk[k]);
     out.mask.push_back(*it);
     const auto p = pacc.getValue(ijk), nn = nacc.getValue(ijk), c = cacc.getValue(ijk);
@@ -417,6 +232,18 @@ LevelData read_level_file(rust::Str path) {
       out.colours.push_back(c[k]);
     }
   }
+  auto macc = mask->getConstAccessor();
+  uint64_t unmatched = 0;
+  for (const auto *grid : {P.get(), N.get(), Cd.get()}) {
+    for (auto it = grid->cbeginValueOn(); it; ++it) {
+      if (!it.isVoxelValue()) {
+        unmatched += it.getVoxelCount();
+      } else if (!macc.isValueOn(it.getCoord())) {
+        ++unmatched;
+      }
+    }
+  }
+  out.unmatched_voxels = unmatched;
   return out;
 }
 
@@ -424,8 +251,7 @@ uint64_t count_points(const openvdb::GridBase &grid, rust::Vec<rust::String> &at
 
 rust::Vec<GridSummary> summarise_vdb_file(rust::Str path) {
   const std::string file_name(path);
-  auto grids = read_capped(path, [&] {
-    probe_parse(file_name, {});
+  auto grids = read_capped(std::string(path), [&] {
     openvdb::io::File file{file_name};
     file.open(false);
     auto all = file.getGrids();

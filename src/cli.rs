@@ -11,6 +11,7 @@ use shapeshifter::recon::Method;
 use shapeshifter::render::{self, RenderOptions};
 use shapeshifter::config::Config;
 use shapeshifter::learn::sample::{self, SampleOptions};
+use shapeshifter::util::lock;
 use shapeshifter::{level::dataset, level::edit, eval::evaluate, io::info, io::mesh, pipeline, learn::sparse, io::vdb};
 
 #[derive(Parser, Debug)]
@@ -28,6 +29,10 @@ pub struct Cli {
     /// (README, Performance).
     #[arg(long, global = true, default_value_t = 1, env = "SHAPESHIFTER_THREADS")]
     pub threads: i32,
+    /// When another command is writing the same output folder, wait for it
+    /// to end instead of failing at once.
+    #[arg(long, global = true)]
+    pub wait: bool,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -564,7 +569,8 @@ fn device(spec: &str) -> Result<tch::Device> {
 
 /// One exemplar through the whole pipeline into `out` ([`pipeline::run::run`]),
 /// and where everything went.
-fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32) -> Result<()> {
+fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32, wait: bool) -> Result<()> {
+    let _lock = lock::lock(out, lock::Mode::Exclusive, wait, "run")?;
     let device = device(&args.setup.device)?;
     // The demo's own profile (sized for its 10-minute budget) unless one is given.
     let default = if matches!(exemplar, pipeline::ExemplarSource::Demo) { "demo" } else { "cpu" };
@@ -633,8 +639,17 @@ fn finish_batch<T: serde::Serialize>(
 }
 
 /// One stage of `run` (see [`Command::Stage`]).
-fn run_stage(stage: StageCmd, quiet: bool) -> Result<()> {
+fn run_stage(stage: StageCmd, quiet: bool, wait: bool) -> Result<()> {
     let recorded = |dir: &std::path::Path| pipeline::RunPaths::new(dir).read_config();
+    // Stages share their folder: a cluster's array tasks write one folder by design.
+    let folder = match &stage {
+        StageCmd::Encode { output, .. } => output,
+        StageCmd::Train { dir, .. } | StageCmd::Sample { dir, .. } | StageCmd::Mesh { dir, .. } | StageCmd::Eval { dir, .. } => dir,
+    };
+    if !matches!(stage, StageCmd::Encode { .. }) && !folder.is_dir() {
+        anyhow::bail!("{}: no such run folder", folder.display());
+    }
+    let _lock = lock::lock(folder, lock::Mode::Shared, wait, "stage")?;
     match stage {
         StageCmd::Encode { mesh, output, profile, overrides } => {
             let config = Config::load(&profile, &overrides)?;
@@ -763,6 +778,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             if resume && !models.is_dir() {
                 anyhow::bail!("{}: --resume, but there is no models folder", models.display());
             }
+            let _lock = lock::lock(&models, lock::Mode::Exclusive, cli.wait, "train")?;
             pipeline::record_config(&models, &config)?;
             let jobs = pipeline::run::auto_jobs(jobs, device, cli.threads);
             if level.is_none() && jobs > 1 {
@@ -811,6 +827,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             options.first = first;
             options.extent = ext;
             options.stop_level = stop_level;
+            let _lock = lock::lock(&output, lock::Mode::Exclusive, cli.wait, "sample")?;
             let from_level = from.as_deref().map(vdb::read_level).transpose()?.map(|(l, _)| l);
             let m = sample::load_models(&models, &config, pipeline::models_needed(&config, &levels, stop_level), device)?;
             let variants = pipeline::sample_variants(&m, &levels, &options, from_level)?;
@@ -830,14 +847,16 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Run { meshes, output, run } => {
             let several = meshes.len() > 1;
+            // One folder per input, named as the batch commands name them
+            // (a/x.off and b/x.off become a_x and b_x, never one folder).
+            let names = pipeline::batch::output_names(&meshes)?;
             let mut failed = 0;
-            for m in &meshes {
-                let out = if several {
-                    output.join(m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default())
-                } else {
-                    output.clone()
-                };
-                if let Err(e) = run_one(pipeline::ExemplarSource::File(m), &out, &run, quiet, cli.threads) {
+            for (m, name) in meshes.iter().zip(&names) {
+                let out = if several { output.join(name) } else { output.clone() };
+                if let Err(e) = run_one(pipeline::ExemplarSource::File(m), &out, &run, quiet, cli.threads, cli.wait) {
+                    if shapeshifter::util::interrupt::requested().is_some() {
+                        return Err(e);
+                    }
                     let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
                     eprintln!("error: {}", msg.join(": "));
                     failed += 1;
@@ -850,7 +869,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Demo { output, run } => {
-            run_one(pipeline::ExemplarSource::Demo, &output, &run, quiet, cli.threads)?;
+            run_one(pipeline::ExemplarSource::Demo, &output, &run, quiet, cli.threads, cli.wait)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Mesh { inputs, output, format, method, resolution, depth, faces, preview, batch } => {
@@ -935,7 +954,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Stage { stage } => {
-            run_stage(stage, quiet)?;
+            run_stage(stage, quiet, cli.wait)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Slurm { meshes, output, n, seed, profile, overrides, partition, gpus_per_job, dry_run } => {

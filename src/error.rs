@@ -8,6 +8,10 @@ pub enum Error {
     File { path: PathBuf, message: String },
     #[error("{0}")]
     Invalid(String),
+    /// A stop signal arrived (util::interrupt); what is on disk is whole and
+    /// the same command resumes.
+    #[error("stopped by {0}: what is on disk is whole; run the same command again to resume")]
+    Stopped(&'static str),
     #[error(transparent)]
     Torch(#[from] tch::TchError),
     #[error(transparent)]

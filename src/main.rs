@@ -7,10 +7,22 @@ use clap::Parser;
 mod cli;
 
 fn main() -> ExitCode {
+    use shapeshifter::util::interrupt;
     shapeshifter::util::alloc::tune_allocator();
     let args = cli::Cli::parse();
     cli::init_logging(&args);
-    match cli::run(args) {
+    if let Err(e) = interrupt::install() {
+        eprintln!("error: cannot watch for stop signals: {e}");
+        return ExitCode::FAILURE;
+    }
+    let result = cli::run(args);
+    // Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM), with
+    // one line saying so, whatever error the stop surfaced as.
+    if let Some(sig) = interrupt::requested() {
+        eprintln!("error: {}", shapeshifter::Error::Stopped(interrupt::name(sig)));
+        return ExitCode::from(interrupt::exit_status(sig));
+    }
+    match result {
         Ok(code) => code,
         Err(e) => {
             // One line: the chain of causes joined.

@@ -87,6 +87,9 @@ pub mod bridge {
         pub voxel_size: f64,
         pub origin: [f64; 3],
         pub meta: Vec<MetaEntry>,
+        /// Read only: voxels active in P, N or Cd but not in the mask (not
+        /// part of the level; a file edited by another tool may have them).
+        pub unmatched_voxels: u64,
     }
 
     /// What `vdb_print -l -m` would say about one grid.

@@ -9,4 +9,5 @@ pub mod mesh;
 pub mod poisson;
 mod mesh_check;
 pub(crate) mod obj;
+pub mod probe;
 pub mod vdb;

@@ -132,6 +132,7 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
         voxel_size,
         origin: origin.to_array(),
         meta,
+        unmatched_voxels: 0,
     };
     let write = |target: &Path, volumes: bool, points: bool| {
         write_atomically(target, |tmp| {
@@ -159,7 +160,17 @@ fn find<'a>(meta: &'a [MetaEntry], key: &str) -> Option<&'a MetaEntry> {
 pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
     check_input_file(path)?;
     let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
+    // Only the four grids a level needs (not the point grid): less of a
+    // damaged file is parsed.
+    crate::io::probe::probe(path, &["mask", "P", "N", "Cd"])?;
     let data = bridge::read_level_file(path_str).map_err(|e| Error::file(path, read_failure(e.what())))?;
+    if data.unmatched_voxels > 0 {
+        log::warn!(
+            "{}: {} voxels active in P, N or Cd but not in the mask are ignored (the mask says which voxels the level holds)",
+            path.display(),
+            data.unmatched_voxels
+        );
+    }
     let missing = |key: &str| Error::file(path, format!("has no '{key}' metadata; not a shapeshifter level file"));
     let resolution = find(&data.meta, "shapeshifter_resolution").ok_or_else(|| missing("shapeshifter_resolution"))?.number;
     let index = find(&data.meta, "shapeshifter_level").ok_or_else(|| missing("shapeshifter_level"))?.number;
@@ -196,7 +207,22 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
     for (i, p) in data.points.chunks_exact(3).enumerate() {
         let centre_world = origin + level.coords[i].as_dvec3() * voxel_world;
         let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-        level.offsets.push(((p - centre_world) / voxel_world).as_vec3());
+        let offset = (p - centre_world) / voxel_world;
+        // A point belongs inside its voxel ([-0.5, 0.5] voxels; half floats
+        // round a world position by up to about 0.15 voxels at 256^3): past
+        // one voxel, P does not describe this voxel and would become a
+        // stray point, so the file is refused; between, it is clamped back.
+        if offset.abs().max_element() > 1.0 {
+            return Err(Error::file(
+                path,
+                format!(
+                    "P at voxel {} lies {:.1} voxels from its voxel's centre: grids P and mask disagree (edited by another tool?)",
+                    level.coords[i],
+                    offset.abs().max_element()
+                ),
+            ));
+        }
+        level.offsets.push(offset.clamp(DVec3::splat(-0.5), DVec3::splat(0.5)).as_vec3());
     }
     if let Some(i) = level.first_non_finite() {
         return Err(Error::file(path, format!("voxel {} has NaN or infinite features", level.coords[i])));
@@ -214,6 +240,7 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
 pub fn summarise(path: &Path) -> Result<Vec<GridSummary>> {
     check_input_file(path)?;
     let path_str = path.to_str().ok_or_else(|| Error::file(path, "path is not valid UTF-8"))?;
+    crate::io::probe::probe(path, &[])?;
     bridge::summarise_vdb_file(path_str).map_err(|e| Error::file(path, read_failure(e.what())))
 }
 
@@ -221,7 +248,7 @@ pub fn summarise(path: &Path) -> Result<Vec<GridSummary>> {
 /// means: a cut-off file makes OpenVDB read garbage as the next grid's type
 /// name and report "Grid type is not registered" (a whole file with a grid
 /// type this build of OpenVDB lacks says the same).
-fn read_failure(what: &str) -> String {
+pub(crate) fn read_failure(what: &str) -> String {
     if what.contains("not registered") {
         format!("truncated or damaged level file, or a grid type OpenVDB 10 does not know (OpenVDB: {what})")
     } else if what.contains("end of file") || what.contains("EOF") {

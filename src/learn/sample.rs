@@ -459,6 +459,9 @@ impl OneVariant<'_> {
         let net = &self.models.diffusion[l].net;
         let times = reverse_times(t_max, steps);
         for (k, w) in times.windows(2).enumerate() {
+            // A stop signal ends sampling between steps (the variant is
+            // sampled again, identically, by the next run).
+            crate::util::interrupt::check()?;
             let x0_hat = clamp_to_feature_ranges(&net.forward_at(&x, w[0], false)?.feats);
             let noise = gaussian(x.len(), seed, l, k + 1, self.models.device);
             let next = reverse_step(self.sampler, final_step, &self.schedule, &x.feats, &x0_hat, w[0], w[1], &noise);

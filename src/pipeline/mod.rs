@@ -204,11 +204,12 @@ pub fn train_in_processes(
         .expect("valid template");
     let mut running: Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)> = Vec::new();
     let result = schedule(models, &mut queue, &mut running, jobs, &bars, &style, &total, &child);
-    if result.is_err() {
+    if result.is_err() && crate::util::interrupt::requested().is_none() {
         // Leave no orphan training on: stop the children still running.
         for (_, process, bar, _) in running.iter_mut() {
             let _ = process.kill();
             let _ = process.wait();
+            crate::util::interrupt::forget(process);
             bar.abandon_with_message("stopped");
         }
     }
@@ -231,24 +232,24 @@ fn schedule(
     let t0 = Instant::now();
     let count = queue.len();
     while !queue.is_empty() || !running.is_empty() {
-        while running.len() < jobs.max(1) && failed.is_empty() {
+        // After a stop signal (forwarded to the children): start nothing
+        // more, and wait for the running children to checkpoint and end.
+        let stopping = crate::util::interrupt::requested().is_some();
+        while running.len() < jobs.max(1) && failed.is_empty() && !stopping {
             let Some(k) = queue.pop() else { break };
             let log_path = models.join(format!("level_{k}_train.log"));
             let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
-            let process = child(k)
-                .stdout(std::process::Stdio::null())
-                .stderr(log)
-                .spawn()
+            let process = crate::util::interrupt::spawn(child(k).stdout(std::process::Stdio::null()).stderr(log))
                 .map_err(|e| Error::Invalid(format!("cannot start the training process of level {k} ({e})")))?;
             let bar = bars.add(indicatif::ProgressBar::new(total(k) as u64));
             bar.set_style(style.clone());
             bar.set_prefix(k.to_string());
             running.push((k, process, bar, log_path));
         }
-        if !failed.is_empty() {
-            queue.clear(); // start nothing more after a failure
+        if !failed.is_empty() || stopping {
+            queue.clear(); // start nothing more after a failure or a stop
         }
-        std::thread::sleep(std::time::Duration::from_millis(500));
+        std::thread::sleep(std::time::Duration::from_millis(if stopping { 50 } else { 500 }));
         let mut i = 0;
         while i < running.len() {
             let (k, process, bar, log_path) = &mut running[i];
@@ -256,6 +257,7 @@ fn schedule(
             match process.try_wait().map_err(|e| Error::Invalid(format!("level {k} training: {e}")))? {
                 None => i += 1,
                 Some(status) => {
+                    crate::util::interrupt::forget(process);
                     if status.success() {
                         bar.finish_with_message("done");
                     } else {
@@ -269,6 +271,7 @@ fn schedule(
             }
         }
     }
+    crate::util::interrupt::check()?;
     if !failed.is_empty() {
         return Err(Error::Invalid(failed.join("; ")));
     }
@@ -298,13 +301,14 @@ pub fn run_shards(
         }
         let log_path = log_dir.join(format!("{what}_{first}.log"));
         let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
-        let spawned = child(first, count).stdout(std::process::Stdio::null()).stderr(log).spawn();
+        let spawned = crate::util::interrupt::spawn(child(first, count).stdout(std::process::Stdio::null()).stderr(log));
         match spawned {
             Ok(c) => running.push((first, c, log_path)),
             Err(e) => {
                 for (_, c, _) in running.iter_mut() {
                     let _ = c.kill();
                     let _ = c.wait();
+                    crate::util::interrupt::forget(c);
                 }
                 return Err(Error::Invalid(format!("cannot start a {what} process ({e})")));
             }
@@ -314,12 +318,15 @@ pub fn run_shards(
     let mut failed = Vec::new();
     for (first, mut c, log_path) in running {
         let status = c.wait().map_err(|e| Error::Invalid(format!("{what} shard {first}: {e}")))?;
+        crate::util::interrupt::forget(&c);
         if !status.success() {
             let text = std::fs::read_to_string(&log_path).unwrap_or_default();
             let last = text.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no output").to_string();
             failed.push(format!("{what} from variant {first} failed ({status}): {last} (log: {})", log_path.display()));
         }
     }
+    // Children stopped by a forwarded signal are not failures of their own.
+    crate::util::interrupt::check()?;
     if failed.is_empty() {
         Ok(())
     } else {
@@ -400,6 +407,9 @@ pub fn train_stage(
         if r.finished {
             mark_done(models_dir, &stage, &d, t.elapsed().as_secs_f64())?;
         }
+        if r.interrupted {
+            crate::util::interrupt::check()?;
+        }
         reports.push(r);
     }
     Ok(reports)
@@ -453,6 +463,7 @@ pub fn sample_stage(
         exemplar_open,
     };
     for &i in &todo {
+        crate::util::interrupt::check()?;
         let tv = Instant::now();
         let one = SampleOptions { first: i, n: 1, ..options.clone() };
         let v = sample_variants(&models, exemplar_levels, &one, None)?;
@@ -574,6 +585,7 @@ pub fn mesh_level(
 pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settings: &MeshConfig) -> Result<usize> {
     let mut done = 0;
     for dir in dirs {
+        crate::util::interrupt::check()?;
         let t = Instant::now();
         // The mesh depends on the finest level's data: its file's digest,
         // checked before anything is read (a finished mesh costs one hash).

@@ -2,7 +2,8 @@
 //! file in the same folder (tempfile) and is renamed onto its name only once
 //! it is complete, so an interrupted or failed write never leaves a
 //! half-written file, and readers (a DCC watching the folder, another array
-//! task) never see one.
+//! task) never see one. The file is flushed to disk before the rename and
+//! the folder after it.
 
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
@@ -42,9 +43,22 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
         .permissions(std::fs::Permissions::from_mode(0o666))
         .tempfile_in(&dir)
         .map_err(|e| Error::file(path, format!("cannot create a temporary file: {e}")))?;
+    // A stop by signal that outlives its grace removes what is registered
+    // here before the process ends (util::interrupt); tempfile removes it on
+    // every other path out.
+    let _registered = crate::util::interrupt::Temporary::register(tmp.path());
     write(tmp.path())?;
+    // On disk before it gets its name, and the name on disk after: a power
+    // cut or a crash of the machine leaves the old file or the whole new one.
+    tmp.as_file().sync_all().map_err(|e| Error::file(path, format!("cannot be flushed to disk: {e}")))?;
     tmp.persist(path).map_err(|e| Error::file(path, e.error.to_string()))?;
+    sync_folder(&dir).map_err(|e| Error::file(path, format!("its folder cannot be flushed to disk: {e}")))?;
     Ok(())
+}
+
+/// Flushes a folder's entries (a rename into it) to disk.
+pub fn sync_folder(dir: &Path) -> std::io::Result<()> {
+    std::fs::File::open(dir)?.sync_all()
 }
 
 /// Writes `bytes` to `path` atomically ([`write_atomically`]).

@@ -215,7 +215,9 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         seconds_before,
     };
     let mut interrupted = false;
-    let stop = || interrupt.map(|f| f.load(Ordering::Relaxed)).unwrap_or(false);
+    // A stop signal (util::interrupt) ends training like the job's own flag:
+    // after the current step, with a checkpoint.
+    let stop = || interrupt.map(|f| f.load(Ordering::Relaxed)).unwrap_or(false) || crate::util::interrupt::requested().is_some();
     let (mut up_now, mut up_rate) = (0usize, 0.0);
 
     let diff_total = if level == 0 { tc.level0_iterations } else { tc.upper_iterations };
