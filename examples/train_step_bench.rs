@@ -17,7 +17,6 @@ use shapeshifter::encode::{encode, exemplar};
 use shapeshifter::learn::nn::new_diffusion;
 use shapeshifter::learn::train::{diffusion_step, TrainingData};
 use shapeshifter::util::rng::Rng;
-use tch::nn::OptimizerConfig;
 use tch::{Device, Kind, Tensor};
 
 #[derive(Parser)]
@@ -72,13 +71,13 @@ fn main() -> anyhow::Result<()> {
         let mut batch = TrainingData::new(&levels, l, Device::Cpu)?.diffusion_batches(tc)?;
         tch::manual_seed(1);
         let net = new_diffusion(&config.model, l, Device::Cpu)?;
-        let mut opt = tch::nn::Adam::default().build(&net.vs, tc.lr)?;
+        let mut opt = shapeshifter::learn::train::optim::Adam::new(&net.vs, false);
         let (mut seconds, mut rows) = (Vec::new(), Vec::new());
         for step in 0..args.steps + 2 {
             let (x0, t) = batch(&mut rng)?;
             let t = Tensor::from_slice(&t);
             let start = Instant::now();
-            diffusion_step(&net.net, &mut opt, &x0, &t, tc.grad_clip, step as u64)?;
+            diffusion_step(&net.net, &mut opt, tc.lr, &x0, &t, tc.grad_clip, step as u64)?;
             if step >= 2 {
                 seconds.push(start.elapsed().as_secs_f64());
                 rows.push(x0.len() as f64);

@@ -591,6 +591,10 @@ fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &Run
     println!("  exemplar levels  {}", paths.exemplar().display());
     println!("  models           {}", paths.models().display());
     println!("  variants         {} ({} folders, previews level_K.png)", paths.variants().display(), summary.variants);
+    if !summary.empty.is_empty() {
+        let names: Vec<String> = summary.empty.iter().map(|e| format!("{} (from level {})", e.name, e.first_empty)).collect();
+        println!("  empty variants   {} of {}: {}", summary.empty.len(), summary.variants, names.join(", "));
+    }
     println!("  metrics          {}", paths.eval_json().display());
     println!("  contact sheet    {}", paths.contact_sheet().display());
     println!("  report           {}", paths.report().display());
@@ -831,6 +835,22 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let from_level = from.as_deref().map(vdb::read_level).transpose()?.map(|(l, _)| l);
             let m = sample::load_models(&models, &config, pipeline::models_needed(&config, &levels, stop_level), device)?;
             let variants = pipeline::sample_variants(&m, &levels, &options, from_level)?;
+            // Nothing usable is a failure; some empty variants a warning.
+            let empty: Vec<pipeline::EmptyVariant> = variants
+                .iter()
+                .enumerate()
+                .filter_map(|(i, v)| {
+                    let first_empty = v.iter().find(|l| l.is_empty()).map(|l| l.index).or(if v.is_empty() { Some(0) } else { None })?;
+                    Some(pipeline::EmptyVariant { name: pipeline::variant_dir(&output, first + i).file_name()?.to_string_lossy().into_owned(), first_empty })
+                })
+                .collect();
+            if !variants.is_empty() && empty.len() == variants.len() {
+                let resolutions: Vec<u32> = levels.iter().map(|l| l.resolution).collect();
+                return Err(pipeline::no_usable_variant(&empty, &resolutions).into());
+            }
+            if !empty.is_empty() {
+                log::warn!("{}", pipeline::empty_variants_warning(&empty, variants.len()));
+            }
             std::fs::create_dir_all(&output)?;
             pipeline::record_config(&output, &config)?;
             for (i, v) in variants.iter().enumerate() {

@@ -9,6 +9,7 @@ mod cli;
 fn main() -> ExitCode {
     use shapeshifter::util::interrupt;
     shapeshifter::util::alloc::tune_allocator();
+    shapeshifter::util::mark_command_start();
     let args = cli::Cli::parse();
     cli::init_logging(&args);
     if let Err(e) = interrupt::install() {

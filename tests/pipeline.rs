@@ -322,19 +322,18 @@ fn weights_of_another_parameterisation_are_refused() {
 /// generator (what dropout and initialisation draw from) does not change it.
 #[test]
 fn training_noise_ignores_the_global_generator() {
-    use shapeshifter::learn::train::{diffusion_step, TrainingData};
-    use tch::nn::OptimizerConfig;
+    use shapeshifter::learn::train::{diffusion_step, optim::Adam, TrainingData};
     let _guard = serial();
     let config = tiny(&["model.dropout=0.0"]);
     let levels = exemplar();
     let loss = |global: i64| {
         tch::manual_seed(5);
         let net = new_diffusion(&config.model, 0, Device::Cpu).unwrap();
-        let mut opt = tch::nn::Adam::default().build(&net.vs, 1e-3).unwrap();
+        let mut opt = Adam::new(&net.vs, false);
         let mut batch = TrainingData::new(&levels, 0, Device::Cpu).unwrap().diffusion_batches(&config.train).unwrap();
         let (x0, t) = batch(&mut shapeshifter::util::rng::Rng::new(1)).unwrap();
         tch::manual_seed(global);
-        diffusion_step(&net.net, &mut opt, &x0, &Tensor::from_slice(&t), 1.0, 42).unwrap()
+        diffusion_step(&net.net, &mut opt, 1e-3, &x0, &Tensor::from_slice(&t), 1.0, 42).unwrap()
     };
     assert_eq!(loss(1), loss(2));
 }

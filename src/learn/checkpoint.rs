@@ -19,6 +19,12 @@ pub fn diffusion_ema_checkpoint(dir: &Path, level: usize) -> PathBuf {
 pub fn upsampler_checkpoint(dir: &Path, level: usize) -> PathBuf {
     dir.join(format!("level_{level}_upsampler.safetensors"))
 }
+/// Adam's moments for a phase of level `level`'s training in `dir`
+/// (`network`: "diffusion" or "upsampler"), so a resumed training continues
+/// exactly.
+pub fn optimiser_checkpoint(dir: &Path, level: usize, network: &str) -> PathBuf {
+    dir.join(format!("level_{level}_{network}_adam.safetensors"))
+}
 /// Training state of level `level` in `dir`.
 pub fn state_path(dir: &Path, level: usize) -> PathBuf {
     dir.join(format!("level_{level}_state.json"))

@@ -63,6 +63,61 @@ fn mark_done(dir: &Path, stage: &str, digest: &str, seconds: f64) -> Result<()> 
     write_file(&path, &text)
 }
 
+/// Whether `dir`'s stamp for `stage` was written before this command began
+/// (what a "reusing" line may claim; children of this command write newer ones).
+fn stamped_before_this_command(dir: &Path, stage: &str) -> bool {
+    std::fs::metadata(stamp_path(dir, stage))
+        .and_then(|m| m.modified())
+        .is_ok_and(|t| t < crate::util::command_started())
+}
+
+/// A sampled variant with nothing at its finest level: its networks' masks
+/// pruned every voxel at `first_empty` (a level index) or before.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct EmptyVariant {
+    pub name: String,
+    pub first_empty: usize,
+}
+
+/// The variant folders of `dirs` without a level file for level `finest`,
+/// with the first level each lacks.
+pub fn empty_variants(dirs: &[PathBuf], finest: usize) -> Vec<EmptyVariant> {
+    dirs.iter()
+        .filter_map(|d| {
+            let first_empty = (0..=finest).find(|&k| !d.join(dataset::level_file_name(k)).is_file())?;
+            Some(EmptyVariant { name: d.file_name()?.to_string_lossy().into_owned(), first_empty })
+        })
+        .collect()
+}
+
+/// The error of a sampling that yielded no usable variant, naming where the
+/// shapes vanished (`resolutions[k]`: level k's voxels per axis) and what to try.
+pub fn no_usable_variant(empty: &[EmptyVariant], resolutions: &[u32]) -> Error {
+    let mut at: std::collections::BTreeMap<usize, usize> = Default::default();
+    for e in empty {
+        *at.entry(e.first_empty).or_default() += 1;
+    }
+    let wheres: Vec<String> = at
+        .iter()
+        .map(|(&k, &n)| format!("{n} at level {k} ({}^3)", resolutions.get(k).copied().unwrap_or(0)))
+        .collect();
+    // The level most variants vanished at names the network to train longer.
+    let worst = at.iter().max_by_key(|(_, &n)| n).map_or(0, |(&k, _)| k);
+    let knob = if worst == 0 { "train.level0_iterations" } else { "train.upper_iterations" };
+    Error::Invalid(format!(
+        "no usable variant: all {} variants pruned to nothing ({}): the level's network marked every voxel empty; \
+         train it longer (--set {knob}=N), try another --seed, or check the exemplar's levels (shapeshifter info)",
+        empty.len(),
+        wheres.join(", ")
+    ))
+}
+
+/// The warning for some empty variants among usable ones.
+pub fn empty_variants_warning(empty: &[EmptyVariant], total: usize) -> String {
+    let names: Vec<String> = empty.iter().map(|e| format!("{} (empty from level {})", e.name, e.first_empty)).collect();
+    format!("{} of {total} variants pruned to nothing and are left out: {}", empty.len(), names.join(", "))
+}
+
 fn digest(parts: &[&str]) -> String {
     crate::util::digest::short_of_parts(parts)
 }
@@ -261,8 +316,7 @@ fn schedule(
                     if status.success() {
                         bar.finish_with_message("done");
                     } else {
-                        let text = std::fs::read_to_string(&*log_path).unwrap_or_default();
-                        let last = text.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no output").to_string();
+                        let last = last_log_line(log_path);
                         failed.push(format!("level {k} training failed ({status}): {last} (log: {})", log_path.display()));
                         bar.abandon_with_message("failed");
                     }
@@ -320,8 +374,7 @@ pub fn run_shards(
         let status = c.wait().map_err(|e| Error::Invalid(format!("{what} shard {first}: {e}")))?;
         crate::util::interrupt::forget(&c);
         if !status.success() {
-            let text = std::fs::read_to_string(&log_path).unwrap_or_default();
-            let last = text.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no output").to_string();
+            let last = last_log_line(&log_path);
             failed.push(format!("{what} from variant {first} failed ({status}): {last} (log: {})", log_path.display()));
         }
     }
@@ -331,6 +384,17 @@ pub fn run_shards(
         Ok(())
     } else {
         Err(Error::Invalid(failed.join("; ")))
+    }
+}
+
+/// The last line of a child's log, or what explains an empty one: a child
+/// whose disk is full cannot write its log either.
+fn last_log_line(log: &Path) -> String {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    match text.lines().rev().find(|l| !l.trim().is_empty()) {
+        Some(l) => l.to_string(),
+        None if crate::util::fs::disk_is_full(log) => "no output: No space left on device (its disk is full)".into(),
+        None => "no output".into(),
     }
 }
 
@@ -450,8 +514,11 @@ pub fn sample_stage(
         .filter(|(i, d)| !is_done(d, "sample", &digest(&[&common, &i.to_string()])))
         .map(|(&i, _)| i)
         .collect();
+    let reused = dirs.iter().zip(&indices).filter(|(d, i)| !todo.contains(i) && stamped_before_this_command(d, "sample")).count();
+    if reused > 0 {
+        log::info!("sample: reusing {reused} variants in {}", variants_dir.display());
+    }
     if todo.is_empty() {
-        log::info!("sample: reusing {} variants in {}", dirs.len(), variants_dir.display());
         return Ok(dirs);
     }
     let t = Instant::now();

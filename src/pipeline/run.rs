@@ -42,6 +42,8 @@ pub struct RunSummary {
     pub total_seconds: f64,
     /// None when no variant could be scored (a warning says why).
     pub evaluation: Option<Evaluation>,
+    /// Variants that pruned to nothing (left out of meshing and scoring).
+    pub empty: Vec<super::EmptyVariant>,
 }
 
 /// Levels trained at once: `jobs`, or with 0 the cores divided by the libtorch
@@ -69,6 +71,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     let (source_name, _) = super::run_encode(exemplar, &paths, config)?;
     stage("encode", t);
 
+    crate::util::interrupt::check()?;
     let t = Instant::now();
     let jobs = auto_jobs(o.jobs, o.device, o.threads);
     let threads = o.threads.max(1).to_string();
@@ -99,6 +102,17 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     }
     let dirs = super::run_sample(&paths, config, o.device, &SampleOptions::from_config(config, o.n, o.seed))?;
     stage("sample", t);
+    // A run that made nothing usable is a failure, with the cause in its
+    // one error line; some empty variants are a warning.
+    let manifest = crate::level::dataset::read_manifest(&paths.exemplar())?;
+    let resolutions: Vec<u32> = manifest.levels.iter().map(|l| l.resolution).collect();
+    let empty = super::empty_variants(&dirs, resolutions.len().saturating_sub(1));
+    if !dirs.is_empty() && empty.len() == dirs.len() {
+        return Err(super::no_usable_variant(&empty, &resolutions));
+    }
+    if !empty.is_empty() {
+        log::warn!("{}", super::empty_variants_warning(&empty, dirs.len()));
+    }
 
     let t = Instant::now();
     if sharded {
@@ -115,5 +129,5 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     let t = Instant::now();
     let evaluation = super::run_eval(&paths, o.n)?;
     stage("evaluate", t);
-    Ok(RunSummary { source_name, variants: dirs.len(), seconds, total_seconds: t0.elapsed().as_secs_f64(), evaluation })
+    Ok(RunSummary { source_name, variants: dirs.len(), seconds, total_seconds: t0.elapsed().as_secs_f64(), evaluation, empty })
 }

@@ -89,6 +89,8 @@ pub fn lock(dir: &Path, mode: Mode, wait: bool, command: &str) -> Result<FolderL
             _ => return Err(Error::file(&path, format!("cannot lock the folder: {e}"))),
         }
     }
+    // What is on disk now was there before this command's work began.
+    crate::util::mark_command_start();
     // Who holds it, for the next command's message (shared holders: the latest).
     let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
     let text = format!("process {} on {}, `{command}`", std::process::id(), host.trim());

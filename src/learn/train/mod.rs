@@ -18,22 +18,23 @@
 //! Reproducibility: every step reseeds libtorch's generator and its own crop/time
 //! generator from (seed, level, phase, step), so a run is a pure function of the
 //! configuration, and a resumed run sees exactly the data the uninterrupted one
-//! would. What a resume cannot restore are the optimiser moments (tch does not expose
-//! Adam's state): they restart from zero, which perturbs the first few hundred steps
-//! after a resume slightly.
+//! would; Adam's moments are checkpointed with the weights ([`optim::Adam`]), so a
+//! training stopped and resumed ends exactly where an uninterrupted one ends.
 //!
 //! Files in `out_dir` (all written atomically: temporary name, then rename):
 //! `level_K_diffusion.safetensors`, `level_K_upsampler.safetensors` (K >= 1),
-//! `level_K_state.json` ([`TrainState`]), `level_K_loss.png`. Checkpoints are written
+//! `level_K_diffusion_adam.safetensors` and `level_K_upsampler_adam.safetensors`
+//! (the optimiser's moments), `level_K_state.json` ([`TrainState`]), `level_K_loss.png`. Checkpoints are written
 //! every `checkpoint_minutes`, on interruption and at the end; the state file is
 //! written after the weights, so it never claims more steps than were saved.
 
+use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use glam::IVec3;
-use tch::{nn::OptimizerConfig, Device, Kind, Tensor};
+use tch::{Device, Kind, Tensor};
 
 use crate::config::{Config, TrainConfig};
 use crate::util::rng::Rng;
@@ -48,12 +49,12 @@ pub mod optim;
 pub mod plot;
 
 pub use crate::learn::checkpoint::{
-    diffusion_checkpoint, diffusion_ema_checkpoint, loss_plot_path, read_state, state_path, upsampler_checkpoint,
-    TrainState,
+    diffusion_checkpoint, diffusion_ema_checkpoint, loss_plot_path, optimiser_checkpoint, read_state, state_path,
+    upsampler_checkpoint, TrainState,
 };
 use crate::learn::seed::{derive_seed, Stream};
 
-use optim::{lr_at, Ema};
+use optim::{lr_at, Adam, Ema};
 
 /// Digest of what a level's training depends on, minus the iteration counts and the
 /// checkpoint interval: a run may be resumed with more iterations.
@@ -127,7 +128,7 @@ fn starting_state(job: &TrainJob, digest: &str) -> Result<TrainState> {
         level,
         config_digest: digest.to_string(),
         full_config_digest: job.config.digest(),
-        note: "Adam moments are not checkpointed; they restart on resume".into(),
+        note: "Adam's moments are checkpointed beside the weights (level_K_*_adam.safetensors)".into(),
         parameterisation: crate::learn::schedule::TRAINING_PARAMETERISATION.into(),
         ..Default::default()
     };
@@ -145,6 +146,28 @@ fn starting_state(job: &TrainJob, digest: &str) -> Result<TrainState> {
                     old.level, old.config_digest
                 ),
             ));
+        }
+        // The state is written after every file of a checkpoint: a file newer
+        // than it is from a checkpoint cut off midway (a full disk, a kill
+        // between two files), and its weights are not those of the steps the
+        // state records. Resuming from them would not reproduce the
+        // uninterrupted training, so the level starts afresh.
+        let state_time = std::fs::metadata(&sp).and_then(|m| m.modified()).ok();
+        let torn = [
+            upsampler_checkpoint(job.out_dir, level),
+            diffusion_checkpoint(job.out_dir, level),
+            diffusion_ema_checkpoint(job.out_dir, level),
+            optimiser_checkpoint(job.out_dir, level, "upsampler"),
+            optimiser_checkpoint(job.out_dir, level, "diffusion"),
+        ]
+        .into_iter()
+        .find(|p| std::fs::metadata(p).and_then(|m| m.modified()).ok().zip(state_time).is_some_and(|(f, s)| f > s));
+        if let Some(newer) = torn {
+            log::warn!(
+                "level {level}: {} is newer than the training state (a checkpoint cut off midway): training restarts from step 0",
+                newer.display()
+            );
+            return Ok(state);
         }
         state.upsampler_steps = old.upsampler_steps;
         state.diffusion_steps = old.diffusion_steps;
@@ -195,15 +218,41 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         }
     }
 
+    // The optimisers, with the moments of an earlier session where there are
+    // some (AdamW for the upsampler, Adam for the diffusion model).
+    let resume_moments = |opt: &mut Adam, network: &str, steps: usize| -> Result<()> {
+        let path = optimiser_checkpoint(out_dir, level, network);
+        if steps == 0 {
+            Ok(())
+        } else if path.exists() {
+            opt.load(&path)
+        } else {
+            log::warn!("level {level}: no {network} optimiser state in {} (trained by an older version): its moments restart", out_dir.display());
+            Ok(())
+        }
+    };
+    let up_opt = match upsampler.as_ref() {
+        Some(u) => {
+            let mut o = Adam::new(&u.vs, true);
+            resume_moments(&mut o, "upsampler", state.upsampler_steps)?;
+            Some(RefCell::new(o))
+        }
+        None => None,
+    };
+    let diff_opt = {
+        let mut o = Adam::new(&diffusion.vs, false);
+        resume_moments(&mut o, "diffusion", state.diffusion_steps)?;
+        RefCell::new(o)
+    };
+
     // The weights' moving average, continued from an earlier session's.
     let ema_path = diffusion_ema_checkpoint(out_dir, level);
-    let ema = std::cell::RefCell::new(if tc.ema_decay > 0.0 {
+    let ema = RefCell::new(if tc.ema_decay > 0.0 {
         let saved = (state.diffusion_steps > 0 && ema_path.exists()).then_some(ema_path.as_path());
         Some(Ema::new(&diffusion.vs, tc.ema_decay, saved)?)
     } else {
         None
     });
-    let save_ema = || -> Result<()> { ema.borrow().as_ref().map_or(Ok(()), |e| e.save(&ema_path)) };
     let lr = |step: usize, total: usize, base: f64| lr_at(step, total, base, tc.lr_warmup_steps, tc.lr_final_ratio);
 
     let mut ckpt = Checkpointer {
@@ -233,34 +282,33 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         let u: &LevelNet<Upsampler> = upsampler.as_ref().expect("upsampler exists above level 0");
         // upsampler: whole grid
         {
-            let mut opt = tch::nn::AdamW::default().build(&u.vs, tc.upsampler_lr)?;
+            let opt = up_opt.as_ref().expect("an upsampler has an optimiser");
             let net = &u.net;
             let phase = Phase { name: "upsampler", total: tc.upsampler_iterations, progress };
             let target_f = target.feats.shallow_clone();
             let base = state.clone();
             let r = phase.run(&mut state.upsampler_steps, &mut state.upsampler_loss, &stop, |step| {
                 tch::manual_seed(derive_seed(tc.seed, level as u64, Stream::UpsamplerStep, step as u64) as i64);
-                opt.set_lr(lr(step, tc.upsampler_iterations, tc.upsampler_lr));
                 let pred = net.forward_t(coarse, true)?;
                 let loss = mse(&pred.feats, &target_f);
+                let mut opt = opt.borrow_mut();
                 opt.zero_grad();
                 loss.backward();
                 opt.clip_grad_norm(tc.grad_clip);
-                opt.step();
+                opt.step(lr(step, tc.upsampler_iterations, tc.upsampler_lr));
                 Ok(loss.double_value(&[]))
-            }, |s| ckpt.maybe(&base, false, s, Some(u), None).map(|_| ()))?;
+            }, |s| ckpt.maybe(&base, false, s, Some((u, opt)), None).map(|_| ()))?;
             up_now = r.0;
             up_rate = r.1;
             interrupted |= r.2;
         }
         if up_now > 0 || interrupted {
-            ckpt.save(&state, Some(u), None)?;
+            ckpt.save(&state, up_opt.as_ref().map(|o| (u, o)), None)?;
         }
     }
 
     // ------------------------------------------------------------ diffusion
     if !interrupted {
-        let mut opt = tch::nn::Adam::default().build(&diffusion.vs, tc.lr)?;
         let net = &diffusion.net;
         let phase = Phase { name: diffusion_phase, total: diff_total, progress };
         let base = state.clone();
@@ -270,14 +318,13 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
             tch::manual_seed(rng.next_u64() as i64);
             let (x0, t_rows) = make_batch(&mut rng)?;
             let t_rows = Tensor::from_slice(&t_rows).to_device(device);
-            opt.set_lr(lr(step, diff_total, tc.lr));
             let noise_seed = derive_seed(tc.seed, level as u64, Stream::TrainingNoise, step as u64);
-            let loss = diffusion_step(net, &mut opt, &x0, &t_rows, tc.grad_clip, noise_seed)?;
+            let loss = diffusion_step(net, &mut diff_opt.borrow_mut(), lr(step, diff_total, tc.lr), &x0, &t_rows, tc.grad_clip, noise_seed)?;
             if let Some(e) = ema.borrow_mut().as_mut() {
                 e.update();
             }
             Ok(loss)
-        }, |s| if ckpt.maybe(&base, true, s, None, Some(d_ref))? { save_ema() } else { Ok(()) })?;
+        }, |s| ckpt.maybe(&base, true, s, None, Some((d_ref, &diff_opt, &ema))).map(|_| ()))?;
         diff_now = r.0;
         diff_rate = r.1;
         interrupted |= r.2;
@@ -287,8 +334,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     state.finished = state.diffusion_steps >= diff_total
         && (level == 0 || state.upsampler_steps >= tc.upsampler_iterations);
     state.seconds = seconds_before + t0.elapsed().as_secs_f64();
-    ckpt.save(&state, upsampler.as_ref(), Some(&diffusion))?;
-    save_ema()?;
+    ckpt.save(&state, upsampler.as_ref().zip(up_opt.as_ref()), Some((&diffusion, &diff_opt, &ema)))?;
     let plot = loss_plot_path(out_dir, level);
     // The learning rate of each step, drawn only when a schedule makes it vary.
     let schedule = tc.lr_warmup_steps > 0 || tc.lr_final_ratio != 1.0;
@@ -421,9 +467,11 @@ impl TrainingData {
 /// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`):
 /// noise (drawn from `noise_seed` alone, not from libtorch's global
 /// generator), forward, MSE to x0, backward, clipped step; returns the loss.
+#[allow(clippy::too_many_arguments)]
 pub fn diffusion_step(
     net: &DiffusionNet,
-    opt: &mut tch::nn::Optimizer,
+    opt: &mut Adam,
+    lr: f64,
     x0: &SparseTensor,
     t_rows: &Tensor,
     clip: f64,
@@ -438,7 +486,7 @@ pub fn diffusion_step(
     opt.zero_grad();
     loss.backward();
     opt.clip_grad_norm(clip);
-    opt.step();
+    opt.step(lr);
     Ok(loss.double_value(&[]))
 }
 
@@ -510,6 +558,9 @@ struct StepInfo<'a> {
     losses: &'a [f32],
 }
 
+/// The diffusion model's checkpoint: weights, optimiser, moving average.
+type DiffusionParts<'a> = (&'a LevelNet<DiffusionNet>, &'a RefCell<Adam>, &'a RefCell<Option<Ema>>);
+
 /// Writes checkpoints at an interval and on demand.
 struct Checkpointer {
     out_dir: PathBuf,
@@ -528,8 +579,8 @@ impl Checkpointer {
         base: &TrainState,
         diffusion_phase: bool,
         info: &StepInfo,
-        u: Option<&LevelNet<Upsampler>>,
-        d: Option<&LevelNet<DiffusionNet>>,
+        u: Option<(&LevelNet<Upsampler>, &RefCell<Adam>)>,
+        d: Option<DiffusionParts>,
     ) -> Result<bool> {
         if self.last.elapsed().as_secs_f64() < self.every_s {
             return Ok(false);
@@ -547,17 +598,24 @@ impl Checkpointer {
         Ok(true)
     }
 
+    /// Weights, then their optimiser's moments, then the state (last: it
+    /// never claims more steps than the files beside it hold).
     fn save(
         &mut self,
         state: &TrainState,
-        u: Option<&LevelNet<Upsampler>>,
-        d: Option<&LevelNet<DiffusionNet>>,
+        u: Option<(&LevelNet<Upsampler>, &RefCell<Adam>)>,
+        d: Option<DiffusionParts>,
     ) -> Result<()> {
-        if let Some(u) = u {
+        if let Some((u, opt)) = u {
             u.save(&upsampler_checkpoint(&self.out_dir, self.level))?;
+            opt.borrow().save(&optimiser_checkpoint(&self.out_dir, self.level, "upsampler"))?;
         }
-        if let Some(d) = d {
+        if let Some((d, opt, ema)) = d {
             d.save(&diffusion_checkpoint(&self.out_dir, self.level))?;
+            opt.borrow().save(&optimiser_checkpoint(&self.out_dir, self.level, "diffusion"))?;
+            if let Some(e) = ema.borrow().as_ref() {
+                e.save(&diffusion_ema_checkpoint(&self.out_dir, self.level))?;
+            }
         }
         let mut st = state.clone();
         st.seconds = self.seconds_before + self.session_start.elapsed().as_secs_f64();
