@@ -91,3 +91,56 @@ fn regression_inputs_fail_cleanly() {
         }
     }
 }
+
+/// Level files another tool edited so that their grids disagree
+/// (tests/inputs/levels, written with pyopenvdb from a level of ours): a
+/// voxel of the mask that P lacks, a P far outside its voxel (both read as
+/// wild points before: P's background, the origin, or the stray position)
+/// are refused with one line; voxels only Cd has are ignored with a warning.
+#[test]
+fn level_files_whose_grids_disagree_are_refused_or_read_with_a_warning() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/inputs/levels");
+    let work = tempfile::tempdir().unwrap();
+    let points = |name: &str| {
+        let out = work.path().join(format!("{name}.ply"));
+        let o = std::process::Command::new(bin()).arg("points").arg(dir.join(name)).arg("-o").arg(&out).output().unwrap();
+        (o, out)
+    };
+    for (name, problem) in [
+        ("mask_voxel_missing_in_P.vdb", "is active in grid 'mask' but not in 'P'"),
+        ("P_outside_its_voxel.vdb", "lies 5.3 voxels from its voxel's centre"),
+    ] {
+        let (o, out) = points(name);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+        assert_eq!(errors.len(), 1, "{name}: {err}");
+        assert!(errors[0].contains(name) && errors[0].contains(problem), "{name}: {}", errors[0]);
+        assert!(!out.exists(), "{name}: no output");
+    }
+    let (o, out) = points("Cd_voxel_outside_the_mask.vdb");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("1 voxels active in P, N or Cd but not in the mask are ignored"), "{err}");
+    let (level, _) = shapeshifter::io::vdb::read_level(&dir.join("Cd_voxel_outside_the_mask.vdb")).unwrap();
+    assert_eq!(level.len(), 454, "the mask's voxels, not Cd's extra one");
+    assert!(out.is_file());
+}
+
+/// A level file is never parsed in the program without the probe process:
+/// when the probe cannot start, reading fails with one line saying so.
+#[test]
+fn a_missing_probe_is_an_error_not_an_unguarded_parse() {
+    let level = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/inputs/levels/Cd_voxel_outside_the_mask.vdb");
+    let o = std::process::Command::new(bin())
+        .arg("info")
+        .arg(&level)
+        .env(shapeshifter::io::probe::PROBE_ENV, "/nonexistent/shapeshifter-vdb-probe")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    assert!(errors[0].contains("cannot start the .vdb probe"), "{}", errors[0]);
+}

@@ -463,3 +463,37 @@ pub fn save_points_ply(path: &Path, positions: &[Vec3], normals: &[Vec3], colour
     }
     write_file(path, &bytes)
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::io::ffi::bridge::{write_mesh, MeshData};
+
+    /// The C++ writer checks the arrays it is given (public fields on this
+    /// side): a colour array shorter than the vertices, an index past them,
+    /// are errors, not reads out of bounds.
+    #[test]
+    fn the_cxx_writer_checks_the_lengths_it_is_given() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.ply");
+        let p = path.to_str().unwrap();
+        let triangle = MeshData { positions: vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], triangles: vec![0, 1, 2], ..Default::default() };
+        write_mesh(p, &triangle, true).unwrap();
+        let short_colours = MeshData { vertex_colours: vec![1.0; 3], ..triangle.clone_data() };
+        assert!(write_mesh(p, &short_colours, true).unwrap_err().what().contains("colour values for 3 vertices"));
+        let past_end = MeshData { triangles: vec![0, 1, 3], ..triangle.clone_data() };
+        assert!(write_mesh(p, &past_end, true).unwrap_err().what().contains("past its 3 vertices"));
+        let ragged = MeshData { positions: vec![0.0; 8], ..triangle.clone_data() };
+        assert!(write_mesh(p, &ragged, true).unwrap_err().what().contains("not triples"));
+    }
+
+    impl MeshData {
+        fn clone_data(&self) -> MeshData {
+            MeshData {
+                positions: self.positions.clone(),
+                triangles: self.triangles.clone(),
+                vertex_colours: self.vertex_colours.clone(),
+                ..Default::default()
+            }
+        }
+    }
+}

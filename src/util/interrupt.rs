@@ -70,10 +70,15 @@ fn force_exit(sig: i32) -> ! {
     for p in TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner()).iter() {
         let _ = std::fs::remove_file(p);
     }
-    eprintln!("error: stopped by {} (forced after the grace period)", name(sig));
-    // SAFETY: _exit ends the process without running atexit handlers or C++
-    // static destructors while other threads may still be inside them.
-    unsafe { libc::_exit(128 + sig) }
+    // Straight to the descriptor: the main thread may hold stderr's lock.
+    let line = format!("error: {} (forced after the grace period)\n", Error::Stopped(name(sig)));
+    // SAFETY: write(2) of a buffer that outlives the call; _exit ends the
+    // process without running atexit handlers or C++ static destructors
+    // while other threads may still be inside them.
+    unsafe {
+        libc::write(2, line.as_ptr().cast(), line.len());
+        libc::_exit(128 + sig)
+    }
 }
 
 /// The signal that asked this process to stop, if any.

@@ -97,7 +97,9 @@ pub fn lock(dir: &Path, mode: Mode, wait: bool, command: &str) -> Result<FolderL
     let _ = file.set_len(0);
     let _ = file.rewind();
     let _ = file.write_all(text.as_bytes());
-    // Children work under this lock.
+    // Children work under this lock. (Set while the command starts, before
+    // its worker threads: the environment is not safe to change beside
+    // threads that read it.)
     let mut held: Vec<String> = std::env::var(HELD_ENV).map(|v| v.lines().map(String::from).collect()).unwrap_or_default();
     held.push(canonical(dir).display().to_string());
     std::env::set_var(HELD_ENV, held.join("\n"));
