@@ -836,21 +836,9 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let m = sample::load_models(&models, &config, pipeline::models_needed(&config, &levels, stop_level), device)?;
             let variants = pipeline::sample_variants(&m, &levels, &options, from_level)?;
             // Nothing usable is a failure; some empty variants a warning.
-            let empty: Vec<pipeline::EmptyVariant> = variants
-                .iter()
-                .enumerate()
-                .filter_map(|(i, v)| {
-                    let first_empty = v.iter().find(|l| l.is_empty()).map(|l| l.index).or(if v.is_empty() { Some(0) } else { None })?;
-                    Some(pipeline::EmptyVariant { name: pipeline::variant_dir(&output, first + i).file_name()?.to_string_lossy().into_owned(), first_empty })
-                })
-                .collect();
-            if !variants.is_empty() && empty.len() == variants.len() {
-                let resolutions: Vec<u32> = levels.iter().map(|l| l.resolution).collect();
-                return Err(pipeline::no_usable_variant(&empty, &resolutions).into());
-            }
-            if !empty.is_empty() {
-                log::warn!("{}", pipeline::empty_variants_warning(&empty, variants.len()));
-            }
+            let names: Vec<String> = (first..first + variants.len()).map(pipeline::variant_name).collect();
+            let resolutions: Vec<u32> = levels.iter().map(|l| l.resolution).collect();
+            pipeline::check_usable(&pipeline::empty_sampled(&variants, &names), variants.len(), &resolutions)?;
             std::fs::create_dir_all(&output)?;
             pipeline::record_config(&output, &config)?;
             for (i, v) in variants.iter().enumerate() {

@@ -112,10 +112,35 @@ pub fn no_usable_variant(empty: &[EmptyVariant], resolutions: &[u32]) -> Error {
     ))
 }
 
-/// The warning for some empty variants among usable ones.
-pub fn empty_variants_warning(empty: &[EmptyVariant], total: usize) -> String {
-    let names: Vec<String> = empty.iter().map(|e| format!("{} (empty from level {})", e.name, e.first_empty)).collect();
-    format!("{} of {total} variants pruned to nothing and are left out: {}", empty.len(), names.join(", "))
+/// The variants of a sampling held in memory (`names[i]` for `variants[i]`,
+/// levels coarsest first) that hold nothing at some level, with the first.
+pub fn empty_sampled(variants: &[Vec<Level>], names: &[String]) -> Vec<EmptyVariant> {
+    variants
+        .iter()
+        .zip(names)
+        .filter_map(|(v, name)| {
+            let first_empty = match v.iter().find(|l| l.is_empty()) {
+                Some(l) => l.index,
+                None if v.is_empty() => 0,
+                None => return None,
+            };
+            Some(EmptyVariant { name: name.clone(), first_empty })
+        })
+        .collect()
+}
+
+/// An honest ending for `total` sampled variants of which `empty` hold
+/// nothing: an error when that is all of them ([`no_usable_variant`]), a
+/// warning naming them when some.
+pub fn check_usable(empty: &[EmptyVariant], total: usize, resolutions: &[u32]) -> Result<()> {
+    if total > 0 && empty.len() == total {
+        return Err(no_usable_variant(empty, resolutions));
+    }
+    if !empty.is_empty() {
+        let names: Vec<String> = empty.iter().map(|e| format!("{} (empty from level {})", e.name, e.first_empty)).collect();
+        log::warn!("{} of {total} variants pruned to nothing and are left out: {}", empty.len(), names.join(", "));
+    }
+    Ok(())
 }
 
 fn digest(parts: &[&str]) -> String {
@@ -479,8 +504,13 @@ pub fn train_stage(
     Ok(reports)
 }
 
+/// The folder name of variant `i`: `variant_007`.
+pub fn variant_name(i: usize) -> String {
+    format!("variant_{i:03}")
+}
+
 pub fn variant_dir(variants_dir: &Path, i: usize) -> PathBuf {
-    variants_dir.join(format!("variant_{i:03}"))
+    variants_dir.join(variant_name(i))
 }
 
 /// Samples variants `options.first .. first + n` into
@@ -1043,4 +1073,36 @@ pub fn write_report(paths: &RunPaths, n: usize, evaluation: Option<&crate::eval:
     let page = render::report::html(&inputs);
     let path = paths.report();
     write_file(&path, &page)
+}
+
+#[cfg(test)]
+mod endings {
+    use super::*;
+
+    /// Variant folders that stop short of the finest level are named with
+    /// the first level they lack; all of them empty is an error naming where
+    /// they vanished, some of them a warning.
+    #[test]
+    fn empty_variants_are_named_and_all_empty_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let dirs: Vec<PathBuf> = (0..3).map(|i| variant_dir(dir.path(), i)).collect();
+        for (d, levels) in dirs.iter().zip([2usize, 1, 0]) {
+            std::fs::create_dir_all(d).unwrap();
+            for k in 0..levels {
+                std::fs::write(d.join(dataset::level_file_name(k)), b"x").unwrap();
+            }
+        }
+        let empty = empty_variants(&dirs, 1);
+        assert_eq!(
+            empty,
+            [EmptyVariant { name: "variant_001".into(), first_empty: 1 }, EmptyVariant { name: "variant_002".into(), first_empty: 0 }]
+        );
+        assert!(check_usable(&empty, 3, &[16, 32]).is_ok(), "one whole variant of three: a warning");
+        let all = empty_variants(&dirs[1..], 1);
+        let e = check_usable(&all, 2, &[16, 32]).unwrap_err().to_string();
+        assert!(e.contains("all 2 variants pruned to nothing (1 at level 0 (16^3), 1 at level 1 (32^3))"), "{e}");
+        let from_memory = empty_sampled(&[vec![Level { index: 0, resolution: 16, ..Default::default() }], vec![]], &["a".into(), "b".into()]);
+        assert_eq!(from_memory.len(), 2);
+        assert_eq!(from_memory[0].first_empty, 0);
+    }
 }

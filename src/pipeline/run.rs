@@ -107,12 +107,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     let manifest = crate::level::dataset::read_manifest(&paths.exemplar())?;
     let resolutions: Vec<u32> = manifest.levels.iter().map(|l| l.resolution).collect();
     let empty = super::empty_variants(&dirs, resolutions.len().saturating_sub(1));
-    if !dirs.is_empty() && empty.len() == dirs.len() {
-        return Err(super::no_usable_variant(&empty, &resolutions));
-    }
-    if !empty.is_empty() {
-        log::warn!("{}", super::empty_variants_warning(&empty, dirs.len()));
-    }
+    super::check_usable(&empty, dirs.len(), &resolutions)?;
 
     let t = Instant::now();
     if sharded {
