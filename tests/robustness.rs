@@ -358,3 +358,50 @@ fn a_run_that_yields_nothing_usable_fails_and_says_where_the_shapes_vanished() {
     assert_eq!(errors.len(), 1, "{}", stderr(&o));
     assert!(errors[0].contains("no usable variant") && errors[0].contains("level 1 (32^3)") && errors[0].contains("train.upper_iterations"), "{}", errors[0]);
 }
+
+/// `train` (levels in child processes) and `sample` (in one process) stop
+/// the same way as `run`, and their next run ends with `run`'s weights and
+/// variants.
+#[test]
+fn train_and_sample_stop_on_a_signal_and_end_like_an_uninterrupted_run() {
+    let reference = slow_reference();
+    let dir = tempfile::tempdir().unwrap();
+    let exemplar = reference.join("exemplar");
+    let models = dir.path().join("models");
+    let mut train: Vec<String> = vec!["train".into(), exemplar.display().to_string(), "--models".into(), models.display().to_string(), "--jobs".into(), "2".into(), "--profile".into(), "demo".into()];
+    train.extend(SLOW.iter().map(|s| s.to_string()));
+    let mut child = Command::new(bin()).args(&train).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    assert!(wait_for(&models.join("level_1_train.log"), Duration::from_secs(60)));
+    std::thread::sleep(Duration::from_millis(1500));
+    // SAFETY: kill(2) on the child this test started and has not reaped.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+    let status = child.wait().unwrap();
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert_eq!(status.code(), Some(143), "train: {err}");
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(processes_naming(&models).is_empty(), "train: {:?}", processes_naming(&models));
+    let o = Command::new(bin()).args(&train).output().unwrap();
+    assert!(o.status.success(), "train resumed: {}", stderr(&o));
+    for k in 0..2 {
+        let name = format!("level_{k}_diffusion.safetensors");
+        assert_eq!(std::fs::read(models.join(&name)).unwrap(), std::fs::read(reference.join("models").join(&name)).unwrap(), "{name}: the stopped and resumed training differs from run's");
+    }
+
+    let out = dir.path().join("sampled");
+    let ref_models = reference.join("models");
+    let sample = ["sample", exemplar.to_str().unwrap(), "--models", ref_models.to_str().unwrap(), "-n", SLOW_N, "-o", out.to_str().unwrap()];
+    let mut child = Command::new(bin()).args(sample).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    std::thread::sleep(Duration::from_millis(1200));
+    // SAFETY: as above.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    let status = child.wait().unwrap();
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert_eq!(status.code(), Some(130), "sample: {err}");
+    assert!(temporaries(&out).is_empty(), "sample: {:?}", temporaries(&out));
+    let o = shapeshifter(&sample);
+    assert!(o.status.success(), "sample again: {}", stderr(&o));
+    let c = shapeshifter(&["compare", reference.join("variants").to_str().unwrap(), out.to_str().unwrap()]);
+    assert!(c.status.success() && stdout(&c).contains("identical"), "{}", stdout(&c));
+}
