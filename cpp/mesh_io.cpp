@@ -13,14 +13,12 @@
 
 #include "shapeshifter/cpp/mesh_io.h"
 #include "shapeshifter/src/io/ffi.rs.h"
+#include "shapeshifter/cpp/checked_file.h"
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
-#include <cerrno>
-#include <cstring>
-#include <fstream>
 #include <map>
 #include <mutex>
 #include <stdexcept>
@@ -174,22 +172,14 @@ void write_mesh(rust::Str path, const MeshData &data, bool binary) {
   OpenMesh::IO::Options opt;
   if (vcol) opt += OpenMesh::IO::Options::VertexColor;
   if (binary) opt += OpenMesh::IO::Options::Binary;
-  // Into a stream checked here: OpenMesh's file writer does not report a
-  // failed write (a full disk left a truncated file that looked written).
+  // Through a stream whose failure is reported (checked_file.h: OpenMesh's
+  // file writer does not report one).
   const std::string file(path);
   const auto dot = file.rfind('.');
   const std::string ext = dot == std::string::npos ? std::string() : file.substr(dot);
-  std::ofstream os(file, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
-  if (!os) throw std::runtime_error(std::string("cannot be created: ") + std::strerror(errno));
-  errno = 0;
-  const bool written = OpenMesh::IO::write_mesh(mesh, os, ext, opt);
-  os.flush();
-  const int flush_errno = errno;
-  const bool flushed = bool(os);
-  os.close();
-  if (!written) throw std::runtime_error("could not be written (OpenMesh has no writer for '" + ext + "')");
-  if (!flushed || os.fail())
-    throw std::runtime_error(std::string("could not be written: ") +
-                             std::strerror(flush_errno != 0 ? flush_errno : EIO));
+  write_checked(file, [&](std::ostream &os) {
+    if (!OpenMesh::IO::write_mesh(mesh, os, ext, opt))
+      throw std::runtime_error("could not be written (OpenMesh has no writer for '" + ext + "')");
+  });
 }
 } // namespace shapeshifter

@@ -3,7 +3,6 @@
 #include "shapeshifter/src/io/ffi.rs.h"
 #include <openvdb/openvdb.h>
 #include "shapeshifter/cpp/vdb_guard.h"
-#include <mutex>
 
 namespace shapeshifter {
 // Voxel centre (i,j,k) sits at origin + ijk * voxel_size, world units.

@@ -66,6 +66,7 @@ std::size_t value_bytes(const std::string &type) {
   if (type == "bool" || type == "mask") return 1;
   return 0;
 }
+} // namespace
 
 // Checks each grid's root-node counts before OpenVDB reads the tree.
 //
@@ -78,8 +79,6 @@ std::size_t value_bytes(const std::string &type) {
 // OpenVDB's own readers for the variable-sized parts (descriptors, metadata,
 // transform); where it cannot follow the file it stops and leaves the verdict
 // to OpenVDB's reader (still under the allocation cap).
-} // namespace
-
 void check_root_counts(const std::string &file_name) {
   std::ifstream is(file_name, std::ios::binary);
   int64_t magic = 0;
@@ -134,7 +133,6 @@ void check_root_counts(const std::string &file_name) {
                                " bytes of topology can hold (damaged .vdb file)");
   }
 }
-
 
 void parse_grids(const std::string &file_name, const std::vector<std::string> &names) {
   read_capped(file_name, [&] {

@@ -9,20 +9,14 @@
 #include "shapeshifter/src/io/ffi.rs.h"
 #include "shapeshifter/cpp/vdb_common.h"
 #include "shapeshifter/cpp/vdb_guard.h"
+#include "shapeshifter/cpp/checked_file.h"
 
 #include <openvdb/io/File.h>
 #include <openvdb/io/GridDescriptor.h>
 #include <openvdb/io/Archive.h>
 
-#include <algorithm>
-#include <cerrno>
-#include <cstring>
-#include <vector>
-
-#include <cstdlib>
-#include <fstream>
-#include <new>
 #include <stdexcept>
+#include <vector>
 
 namespace shapeshifter {
 namespace {
@@ -95,24 +89,12 @@ Vec3fGrid::Ptr vector_grid(const char *name, const LevelData &level, const rust:
 
 namespace {
 // Writes grids exactly as openvdb::io::File::write does (a seekable archive:
-// grid offsets, so readers may load grids one at a time), into a stream this
-// code checks. Why: io::File neither checks its stream nor reports a failed
-// write, so on a full disk it returned normally and a truncated file was
-// renamed into place under its final name.
+// grid offsets, so readers may load grids one at a time), into a stream whose
+// failure is reported (checked_file.h: io::File does not report one).
 class CheckedArchive : public openvdb::io::Archive {
 public:
   void write_file(const std::string &file_name, const openvdb::GridPtrVec &grids) const {
-    std::ofstream os(file_name, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
-    if (!os) throw std::runtime_error(std::string("cannot be created: ") + std::strerror(errno));
-    errno = 0;
-    Archive::write(os, grids, /*seekable=*/true);
-    os.flush();
-    const int flush_errno = errno;
-    const bool flushed = bool(os);
-    os.close();
-    if (!flushed || os.fail())
-      throw std::runtime_error(std::string("could not be written: ") +
-                               std::strerror(flush_errno != 0 ? flush_errno : EIO));
+    write_checked(file_name, [&](std::ostream &os) { Archive::write(os, grids, /*seekable=*/true); });
   }
 };
 } // namespace

@@ -240,6 +240,19 @@ fn wait_for(path: &Path, limit: Duration) -> bool {
     false
 }
 
+/// Sends `sig` to `child` (started with stderr piped) and waits for it: its
+/// status, its stderr, and the seconds from the signal to its end.
+fn stop(mut child: std::process::Child, sig: i32) -> (std::process::ExitStatus, String, f64) {
+    let t0 = Instant::now();
+    // SAFETY: kill(2) on a child this test started and has not reaped.
+    unsafe { libc::kill(child.id() as libc::pid_t, sig) };
+    let status = child.wait().unwrap();
+    let seconds = t0.elapsed().as_secs_f64();
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    (status, err, seconds)
+}
+
 #[test]
 fn stop_signals_end_every_process_and_the_next_run_resumes_to_the_same_result() {
     let reference = slow_reference();
@@ -255,7 +268,7 @@ fn stop_signals_end_every_process_and_the_next_run_resumes_to_the_same_result() 
     for (i, (sig, stage, marker)) in cases.iter().enumerate() {
         let out = dir.path().join(format!("run_{i}"));
         let out_s = out.to_str().unwrap().to_string();
-        let mut child = Command::new(bin())
+        let child = Command::new(bin())
             .args(run_args(&out_s, SLOW_N, SLOW))
             .arg("-q")
             .stdout(Stdio::null())
@@ -265,13 +278,7 @@ fn stop_signals_end_every_process_and_the_next_run_resumes_to_the_same_result() 
         assert!(wait_for(&out.join(marker), Duration::from_secs(120)), "{stage}: {marker} never appeared");
         // Into the stage: training a second, sampling and meshing at once.
         std::thread::sleep(Duration::from_millis(if *stage == "training" { 1500 } else { 100 }));
-        let t0 = Instant::now();
-        // SAFETY: kill(2) on the child this test started and has not reaped.
-        unsafe { libc::kill(child.id() as libc::pid_t, *sig) };
-        let status = child.wait().unwrap();
-        let seconds = t0.elapsed().as_secs_f64();
-        let mut err = String::new();
-        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+        let (status, err, seconds) = stop(child, *sig);
         std::thread::sleep(Duration::from_millis(200));
         let left = processes_naming(&out);
         let temps = temporaries(&out);
@@ -370,14 +377,10 @@ fn train_and_sample_stop_on_a_signal_and_end_like_an_uninterrupted_run() {
     let models = dir.path().join("models");
     let mut train: Vec<String> = vec!["train".into(), exemplar.display().to_string(), "--models".into(), models.display().to_string(), "--jobs".into(), "2".into(), "--profile".into(), "demo".into()];
     train.extend(SLOW.iter().map(|s| s.to_string()));
-    let mut child = Command::new(bin()).args(&train).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let child = Command::new(bin()).args(&train).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
     assert!(wait_for(&models.join("level_1_train.log"), Duration::from_secs(60)));
     std::thread::sleep(Duration::from_millis(1500));
-    // SAFETY: kill(2) on the child this test started and has not reaped.
-    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
-    let status = child.wait().unwrap();
-    let mut err = String::new();
-    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    let (status, err, _) = stop(child, libc::SIGTERM);
     assert_eq!(status.code(), Some(143), "train: {err}");
     std::thread::sleep(Duration::from_millis(200));
     assert!(processes_naming(&models).is_empty(), "train: {:?}", processes_naming(&models));
@@ -391,13 +394,9 @@ fn train_and_sample_stop_on_a_signal_and_end_like_an_uninterrupted_run() {
     let out = dir.path().join("sampled");
     let ref_models = reference.join("models");
     let sample = ["sample", exemplar.to_str().unwrap(), "--models", ref_models.to_str().unwrap(), "-n", SLOW_N, "-o", out.to_str().unwrap()];
-    let mut child = Command::new(bin()).args(sample).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let child = Command::new(bin()).args(sample).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
     std::thread::sleep(Duration::from_millis(1200));
-    // SAFETY: as above.
-    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
-    let status = child.wait().unwrap();
-    let mut err = String::new();
-    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    let (status, err, _) = stop(child, libc::SIGINT);
     assert_eq!(status.code(), Some(130), "sample: {err}");
     assert!(temporaries(&out).is_empty(), "sample: {:?}", temporaries(&out));
     let o = shapeshifter(&sample);

@@ -2,8 +2,9 @@
 //! reader that crashes on a damaged file takes down only this process
 //! (`shapeshifter::io::probe` says why and how it is used). Not meant to be
 //! run by hand: `shapeshifter-vdb-probe FILE.vdb [GRID...]` exits 0 when the
-//! parse succeeds, 1 with one error line when it fails cleanly, 2 on bad
-//! usage; a crash ends it by a signal.
+//! parse succeeds, 1 with OpenVDB's message (one line on stderr, which the
+//! caller puts in its own error) when it fails cleanly, 2 on bad usage; a
+//! crash ends it by a signal.
 //!
 //! It calls the C++ reader directly (cpp/vdb_guard.cpp), not through the
 //! library crate, so that it starts in milliseconds: the library links
@@ -35,6 +36,6 @@ fn main() -> ExitCode {
         return ExitCode::SUCCESS;
     }
     let end = message.iter().position(|&b| b == 0).unwrap_or(message.len());
-    eprintln!("error: {file}: {}", String::from_utf8_lossy(&message[..end]));
+    eprintln!("{}", String::from_utf8_lossy(&message[..end]));
     ExitCode::FAILURE
 }

@@ -65,7 +65,6 @@ pub fn probe(path: &Path, names: &[&str]) -> Result<()> {
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
-        .env("RAYON_NUM_THREADS", "1")
         .spawn()
         .map_err(|e| Error::file(path, format!("cannot start the .vdb probe {} ({e})", program.display())))?;
     let t0 = Instant::now();
@@ -90,7 +89,7 @@ pub fn probe(path: &Path, names: &[&str]) -> Result<()> {
     };
     use std::io::Read;
     use std::os::unix::process::ExitStatusExt;
-    // One line of at most ~520 bytes (the probe cuts its message).
+    // OpenVDB's message, one line of at most 511 bytes (the probe cuts it).
     let mut said = String::new();
     if let Some(mut e) = child.stderr.take() {
         let _ = e.read_to_string(&mut said);
@@ -98,12 +97,7 @@ pub fn probe(path: &Path, names: &[&str]) -> Result<()> {
     match (status.code(), status.signal()) {
         (_, Some(sig)) => Err(Error::file(path, format!("OpenVDB's reader crashed on it (signal {sig}): damaged .vdb file"))),
         (Some(0), _) => Ok(()),
-        (Some(1), _) => {
-            // "error: FILE: MESSAGE" -> MESSAGE
-            let line = said.lines().next().unwrap_or("").trim();
-            let message = line.strip_prefix("error: ").and_then(|l| l.strip_prefix(&format!("{}: ", path.display()))).unwrap_or(line);
-            Err(Error::file(path, crate::io::vdb::read_failure(message)))
-        }
+        (Some(1), _) => Err(Error::file(path, crate::io::vdb::read_failure(said.lines().next().unwrap_or("").trim()))),
         (Some(c), _) => Err(Error::file(path, format!("the .vdb probe {} failed (exit status {c})", program.display()))),
         (None, None) => Err(Error::file(path, "the .vdb probe ended without a status")),
     }

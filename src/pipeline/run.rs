@@ -68,7 +68,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     let mut stage = |name: &'static str, t: Instant| seconds.push((name, t.elapsed().as_secs_f64()));
 
     let t = Instant::now();
-    let (source_name, _) = super::run_encode(exemplar, &paths, config)?;
+    let (source_name, exemplar_levels) = super::run_encode(exemplar, &paths, config)?;
     stage("encode", t);
 
     crate::util::interrupt::check()?;
@@ -104,8 +104,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     stage("sample", t);
     // A run that made nothing usable is a failure, with the cause in its
     // one error line; some empty variants are a warning.
-    let manifest = crate::level::dataset::read_manifest(&paths.exemplar())?;
-    let resolutions: Vec<u32> = manifest.levels.iter().map(|l| l.resolution).collect();
+    let resolutions: Vec<u32> = exemplar_levels.iter().map(|l| l.resolution).collect();
     let empty = super::empty_variants(&dirs, resolutions.len().saturating_sub(1));
     super::check_usable(&empty, dirs.len(), &resolutions)?;
 

@@ -14,12 +14,10 @@ pub mod rng;
 /// "reusing" message compares stamps with (a stamp older than this was on
 /// disk before; this command's children write newer ones).
 pub fn command_started() -> std::time::SystemTime {
-    let nanos = STARTED_NS.load(std::sync::atomic::Ordering::SeqCst);
-    if nanos == 0 {
+    if STARTED_NS.load(std::sync::atomic::Ordering::SeqCst) == 0 {
         mark_command_start();
-        return command_started();
     }
-    std::time::UNIX_EPOCH + std::time::Duration::from_nanos(nanos)
+    std::time::UNIX_EPOCH + std::time::Duration::from_nanos(STARTED_NS.load(std::sync::atomic::Ordering::SeqCst))
 }
 
 /// Sets [`command_started`] to now.
