@@ -34,7 +34,7 @@ fn bumpy_sphere(rings: u32, segs: u32, phase: f32) -> Mesh {
 
 fn frame_of(mesh: &Mesh) -> Frame {
     let (lo, hi) = mesh.bounds();
-    Frame { centre: ((lo + hi) * 0.5).as_dvec3(), scale: 2.0 / (hi - lo).as_dvec3().length() }
+    Frame { centre: ((lo + hi) * 0.5).as_dvec3(), scale: 2.0 / (hi - lo).as_dvec3().length(), ..Default::default() }
 }
 
 /// CPU time of this process (user + system, all threads), seconds (Linux).

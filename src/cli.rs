@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-use shapeshifter::encode::{EncodeOptions, Pooling};
+use shapeshifter::encode::Pooling;
 use shapeshifter::recon::Method;
 use shapeshifter::render::{self, RenderOptions};
 use shapeshifter::config::Config;
@@ -83,6 +83,8 @@ pub enum Command {
         points: vdb::PointsLayout,
         #[command(flatten)]
         view: ViewArgs,
+        #[command(flatten)]
+        exemplar: ExemplarArgs,
         #[command(flatten)]
         batch: BatchArgs,
     },
@@ -278,7 +280,7 @@ pub enum Command {
     /// Example: shapeshifter render out/tower/level_4.vdb -o level_4.png --azimuth 120
     /// Example: shapeshifter render out/demo/exemplar out/demo/variants/variant_* -o sheet.png
     Render {
-        /// A level file (.vdb) or a mesh; or folders of level files.
+        /// A level file (.vdb), a mesh or a point cloud; or folders of level files.
         #[arg(required = true)]
         inputs: Vec<PathBuf>,
         /// The PNG to write.
@@ -286,6 +288,10 @@ pub enum Command {
         output: PathBuf,
         #[command(flatten)]
         view: ViewArgs,
+        /// The vertical axis the camera orbits [default: a level's own; z for
+        /// LAS/LAZ and E57, y for meshes and PLY].
+        #[arg(long, value_enum)]
+        up: Option<shapeshifter::level::Up>,
     },
     /// One stage of `run` on a run folder, as one job of a cluster runs it
     /// (`slurm` writes the jobs): encode, train, sample, mesh, eval. The same
@@ -465,6 +471,60 @@ pub struct RunArgs {
     pub seed: u64,
     #[command(flatten)]
     pub setup: SetupArgs,
+    #[command(flatten)]
+    pub exemplar: ExemplarArgs,
+}
+
+/// How an exemplar file is read: its scale, its vertical axis, and for point
+/// clouds where normals and colours come from.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ExemplarArgs {
+    /// The finest level's voxel edge in the exemplar's units (e.g. 0.2 for
+    /// 20 cm voxels of a scan in metres) instead of fitting the exemplar to
+    /// the grid; level files keep the exemplar's coordinates either way.
+    #[arg(long, value_name = "UNITS")]
+    pub voxel_size: Option<f64>,
+    /// The exemplar's vertical axis [default: z for LAS/LAZ and E57, y for
+    /// meshes and PLY]. Only cameras use it: nothing is rotated.
+    #[arg(long, value_enum)]
+    pub up: Option<shapeshifter::level::Up>,
+    /// Point clouds: colour from RGB, intensity, classification or none
+    /// [default: auto, RGB where the file has it].
+    #[arg(long, value_enum)]
+    pub cloud_colour: Option<shapeshifter::io::cloud::CloudColour>,
+    /// Point clouds: how estimated normals get their sign [default: graph].
+    #[arg(long, value_enum)]
+    pub normal_orientation: Option<shapeshifter::geom::normals::Orientation>,
+    /// Point clouds: neighbours each estimated normal is fitted to [default: 16].
+    #[arg(long, value_name = "K")]
+    pub normal_neighbours: Option<usize>,
+    /// Point clouds: estimate normals even where the file has them.
+    #[arg(long)]
+    pub estimate_normals: bool,
+}
+
+impl ExemplarArgs {
+    /// Sets what was given on the command line into `c`.
+    pub fn apply(&self, c: &mut shapeshifter::config::EncodeConfig) {
+        if self.voxel_size.is_some() {
+            c.voxel_size = self.voxel_size;
+        }
+        if self.up.is_some() {
+            c.up = self.up;
+        }
+        if let Some(v) = self.cloud_colour {
+            c.cloud_colour = v;
+        }
+        if let Some(v) = self.normal_orientation {
+            c.normal_orientation = v;
+        }
+        if let Some(v) = self.normal_neighbours {
+            c.normal_neighbours = v;
+        }
+        if self.estimate_normals {
+            c.estimate_normals = true;
+        }
+    }
 }
 
 /// Mesh formats that keep vertex colours.
@@ -574,8 +634,11 @@ fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &Run
     let device = device(&args.setup.device)?;
     // The demo's own profile (sized for its 10-minute budget) unless one is given.
     let default = if matches!(exemplar, pipeline::ExemplarSource::Demo) { "demo" } else { "cpu" };
+    let mut config = Config::load(args.setup.profile(default), &args.setup.overrides)?;
+    args.exemplar.apply(&mut config.encode);
+    pipeline::encode_options(&config).validate().map_err(shapeshifter::Error::from)?;
     let options = pipeline::run::RunOptions {
-        config: Config::load(args.setup.profile(default), &args.setup.overrides)?,
+        config,
         device,
         device_spec: args.setup.device.clone(),
         n: args.n,
@@ -716,14 +779,14 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(if report.failed() > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
-        Command::Encode { meshes, output, sampling_resolution, coarsest, finest, pooling, preview, points, view, batch } => {
-            let options = EncodeOptions {
-                sampling_resolution,
-                coarsest_resolution: coarsest,
-                finest_resolution: finest,
-                pooling,
-                ..Default::default()
-            };
+        Command::Encode { meshes, output, sampling_resolution, coarsest, finest, pooling, preview, points, view, exemplar, batch } => {
+            let mut config = Config::load("cpu", &[])?;
+            config.encode.sampling_resolution = sampling_resolution;
+            config.encode.coarsest_resolution = coarsest;
+            config.encode.finest_resolution = finest;
+            config.encode.pooling = pooling;
+            exemplar.apply(&mut config.encode);
+            let options = pipeline::encode_options(&config);
             options.validate().map_err(shapeshifter::Error::from)?;
             let previews = preview.then(|| view.options());
             let write = vdb::WriteOptions { points, ..Default::default() };
@@ -908,7 +971,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 mesh::save(&m, &target, true).map_err(|e| e.to_string())?;
                 if let Some(png) = &preview {
-                    let img = render::render_mesh(&m, &render::preview_options()).map_err(|e| fail(&e))?;
+                    let view = RenderOptions { up: Some(level.frame.up), ..render::preview_options() };
+                    let img = render::render_mesh(&m, &view).map_err(|e| fail(&e))?;
                     render::save_png(&img, png).map_err(|e| e.to_string())?;
                 }
                 let summary = MeshedSummary {
@@ -936,7 +1000,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             });
             finish_batch(&report, "points", several.then_some(output.as_path()), batch.json)
         }
-        Command::Render { inputs, output, view } => {
+        Command::Render { inputs, output, view, up } => {
             if inputs.iter().any(|p| p.is_dir()) {
                 let entries = inputs
                     .iter()
@@ -949,14 +1013,20 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let [input] = inputs.as_slice() else {
                 anyhow::bail!("render: one file (a .vdb level or a mesh), or folders of level files for a contact sheet");
             };
-            let opts = view.options();
+            let opts = RenderOptions { up, ..view.options() };
             let ext = input.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+            let failed = |e: render::RenderError| anyhow::anyhow!("{}: {e}", input.display());
             let img = if ext == "vdb" {
                 let (level, _) = vdb::read_level(input)?;
-                render::render_level(&level, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?
+                render::render_level(&level, &opts).map_err(failed)?
             } else {
-                let m = mesh::load(input)?;
-                render::render_mesh(&m, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?
+                match shapeshifter::io::exemplar::Exemplar::load(input)? {
+                    shapeshifter::io::exemplar::Exemplar::Mesh(m) => render::render_mesh(&m, &opts).map_err(failed)?,
+                    shapeshifter::io::exemplar::Exemplar::Cloud(c) => {
+                        let opts = RenderOptions { up: Some(up.unwrap_or(c.up)), ..opts };
+                        render::render_points(&c.oriented_points(opts.up.unwrap()), &opts).map_err(failed)?
+                    }
+                }
             };
             render::save_png(&img, &output)?;
             Ok(ExitCode::SUCCESS)

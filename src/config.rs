@@ -117,6 +117,37 @@ pub struct EncodeConfig {
     pub finest_resolution: u32,
     /// How children are pooled into a parent's surface point.
     pub pooling: crate::encode::Pooling,
+    // Settings for scans and real-world units. Left out of the recorded
+    // configuration (and so of the stage digests) at their defaults, so that
+    // folders encoded before they existed are still reused.
+    /// The finest voxel's edge in the exemplar's units; unset: fit the cube.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub voxel_size: Option<f64>,
+    /// The exemplar's vertical axis; unset: the format's own (z for scans).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<crate::level::Up>,
+    /// Point clouds: where colour comes from (auto, rgb, intensity, classification, none).
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub cloud_colour: crate::io::cloud::CloudColour,
+    /// Point clouds: neighbours of each estimated normal's plane.
+    #[serde(default = "default_normal_neighbours", skip_serializing_if = "is_default_normal_neighbours")]
+    pub normal_neighbours: usize,
+    /// Point clouds: how estimated normals get their sign (graph, up, outward).
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub normal_orientation: crate::geom::normals::Orientation,
+    /// Point clouds: estimate normals even where the file has them.
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub estimate_normals: bool,
+}
+
+fn is_default<T: Default + PartialEq>(v: &T) -> bool {
+    *v == T::default()
+}
+fn default_normal_neighbours() -> usize {
+    crate::encode::CloudOptions::default().normal_neighbours
+}
+fn is_default_normal_neighbours(n: &usize) -> bool {
+    *n == default_normal_neighbours()
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -432,6 +463,16 @@ fn one_line(e: &impl std::fmt::Display) -> String {
 
 /// `section.key=value`, value parsed as TOML (number, bool, string) or taken
 /// as a bare string.
+/// Keys a profile may leave out (their defaults are not recorded).
+const OPTIONAL_KEYS: &[(&str, &str)] = &[
+    ("encode", "voxel_size"),
+    ("encode", "up"),
+    ("encode", "cloud_colour"),
+    ("encode", "normal_neighbours"),
+    ("encode", "normal_orientation"),
+    ("encode", "estimate_normals"),
+];
+
 fn apply_override(table: &mut toml::Table, spec: &str) -> Result<()> {
     let bad = || Error::Invalid(format!("--set '{spec}': expected section.key=value"));
     let (path, value) = spec.split_once('=').ok_or_else(bad)?;
@@ -445,6 +486,11 @@ fn apply_override(table: &mut toml::Table, spec: &str) -> Result<()> {
         .get_mut(section)
         .and_then(|s| s.as_table_mut())
         .ok_or_else(|| Error::Invalid(format!("--set '{spec}': no section '{section}'")))?;
+    if !sec.contains_key(key) && OPTIONAL_KEYS.contains(&(section, key)) {
+        // Left out at their defaults: typed by the struct when it is read.
+        sec.insert(key.to_string(), parsed);
+        return Ok(());
+    }
     let old = sec
         .get(key)
         .ok_or_else(|| Error::Invalid(format!("--set '{spec}': no key '{key}' in [{section}]")))?;

@@ -19,7 +19,7 @@ fn sample_level() -> Level {
     let mut level = Level {
         index: 1,
         resolution: res,
-        frame: Frame { centre: DVec3::new(12.5, -3.0, 100.25), scale: 0.037 },
+        frame: Frame { centre: DVec3::new(12.5, -3.0, 100.25), scale: 0.037, ..Default::default() },
         ..Default::default()
     };
     let mut rng = shapeshifter::util::rng::Rng::new(12345);

@@ -30,6 +30,7 @@
 //! voxel size `vs = 2 / resolution`; *grid units* (voxelisation only) put voxel
 //! `(i, j, k)` at `[i, i+1) x [j, j+1) x [k, k+1)`.
 
+pub mod cloud;
 pub mod exemplar;
 
 use std::time::Instant;
@@ -38,7 +39,7 @@ use glam::{DVec3, IVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::level::{Frame, Level};
-use crate::io::mesh::{Mesh, MeshColours, Texture};
+use crate::io::mesh::{Mesh, MeshColours};
 
 /// How 2x2x2 children are pooled into a parent's surface point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
@@ -68,6 +69,39 @@ pub struct EncodeOptions {
     /// RGB in [0, 1] for meshes without colour or texture. Mid grey by default: it
     /// maps to 0 under the networks' `2*(2c-1)` colour scaling.
     pub default_colour: Vec3,
+    /// The finest level's voxel edge in the exemplar's own units (metres for a
+    /// scan): the grid is this fine whatever the exemplar's size, and must hold
+    /// it. None: the bounding box is fitted to the cube (diagonal 2).
+    pub voxel_size: Option<f64>,
+    /// The exemplar's vertical axis (previews' cameras, the graph orientation's
+    /// seeds); None: the format's own (z for LAS/LAZ/E57, y otherwise).
+    pub up: Option<crate::level::Up>,
+    /// How point-cloud exemplars get their normals and colours.
+    pub cloud: CloudOptions,
+}
+
+/// Settings for point-cloud exemplars.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CloudOptions {
+    /// Where colours come from.
+    pub colour: crate::io::cloud::CloudColour,
+    /// Neighbours of the plane fitted for an estimated normal.
+    pub normal_neighbours: usize,
+    /// How estimated normals get their sign.
+    pub orientation: crate::geom::normals::Orientation,
+    /// Estimate normals even where the file has them.
+    pub estimate_normals: bool,
+}
+
+impl Default for CloudOptions {
+    fn default() -> Self {
+        CloudOptions {
+            colour: Default::default(),
+            normal_neighbours: 16,
+            orientation: Default::default(),
+            estimate_normals: false,
+        }
+    }
 }
 
 impl Default for EncodeOptions {
@@ -78,6 +112,9 @@ impl Default for EncodeOptions {
             finest_resolution: 256,
             pooling: Pooling::Qem,
             default_colour: Vec3::splat(0.5),
+            voxel_size: None,
+            up: None,
+            cloud: CloudOptions::default(),
         }
     }
 }
@@ -118,6 +155,14 @@ impl EncodeOptions {
         if !c.is_finite() || c.min_element() < 0.0 || c.max_element() > 1.0 {
             return bad(format!("default_colour {c} is not an RGB triple in [0, 1]"));
         }
+        if let Some(v) = self.voxel_size {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(format!("voxel size {v} must be a positive number (the finest voxel's edge in the exemplar's units)"));
+            }
+        }
+        if !(3..=64).contains(&self.cloud.normal_neighbours) {
+            return bad(format!("normal_neighbours = {} must be between 3 and 64", self.cloud.normal_neighbours));
+        }
         Ok(())
     }
 }
@@ -133,6 +178,10 @@ pub enum EncodeError {
     InvalidMesh { name: String, reason: String },
     #[error("mesh '{0}' covers no voxel (all of its triangles are degenerate)")]
     NoActiveVoxels(String),
+    #[error("'{name}' is {extent:.6} units across: at a voxel size of {voxel_size} the finest level ({resolution}^3) spans {span:.6}; use --voxel-size {suggest:.6} or more, or a finer level")]
+    DoesNotFit { name: String, extent: f64, voxel_size: f64, resolution: u32, span: f64, suggest: f64 },
+    #[error("point cloud '{name}': {reason}")]
+    Cloud { name: String, reason: String },
 }
 
 /// Wall-clock seconds per stage and sizes, for logs and benchmarks.
@@ -175,9 +224,41 @@ pub fn normalisation_frame(mesh: &Mesh) -> Frame {
         .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| {
             (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
         });
+    box_frame(lo, hi)
+}
+
+/// The frame fitting the box `lo..hi` into the normalised cube (diagonal 2).
+pub fn box_frame(lo: DVec3, hi: DVec3) -> Frame {
     let diagonal = (hi - lo).length();
     let scale = if diagonal > 0.0 && diagonal.is_finite() { 2.0 / diagonal } else { 1.0 };
-    Frame { centre: (lo + hi) * 0.5, scale }
+    Frame { centre: (lo + hi) * 0.5, scale, ..Default::default() }
+}
+
+/// The frame of an exemplar with bounds `lo..hi` under `options`: fitted to
+/// the cube, or (voxel_size) with the finest voxel that many world units, the
+/// box centred; an error where the box does not fit in the cube then.
+pub fn exemplar_frame(name: &str, lo: DVec3, hi: DVec3, options: &EncodeOptions, format_up: crate::level::Up) -> Result<Frame, EncodeError> {
+    let mut frame = box_frame(lo, hi);
+    frame.up = options.up.unwrap_or(format_up);
+    if let Some(vs) = options.voxel_size {
+        let r = options.finest_resolution;
+        frame.scale = 2.0 / (r as f64 * vs);
+        // One sampling voxel of margin: a point on the cube's face has no voxel.
+        let room = 2.0 - 2.0 * 2.0 / options.sampling_resolution as f64;
+        let extent = (hi - lo).max_element();
+        if extent * frame.scale > room {
+            let span = room / frame.scale;
+            return Err(EncodeError::DoesNotFit {
+                name: name.to_string(),
+                extent,
+                voxel_size: vs,
+                resolution: r,
+                span,
+                suggest: vs * extent / span,
+            });
+        }
+    }
+    Ok(frame)
 }
 
 /// Encodes `mesh` into levels `coarsest_resolution ..= finest_resolution`, coarsest
@@ -190,7 +271,8 @@ pub fn encode(mesh: &Mesh, options: &EncodeOptions) -> Result<(Vec<Level>, Encod
     let mut stats = EncodeStats::default();
 
     let t = Instant::now();
-    let frame = normalisation_frame(mesh);
+    let (lo, hi) = mesh.bounds();
+    let frame = if mesh.positions.is_empty() { Frame::default() } else { exemplar_frame(&mesh.name, lo.as_dvec3(), hi.as_dvec3(), options, crate::level::Up::Y)? };
     let prep = Prepared::new(mesh, frame)?;
     let colours = ColourSource::new(mesh, options.default_colour)?;
     stats.normalise_s = t.elapsed().as_secs_f64();
@@ -239,6 +321,14 @@ pub fn encode(mesh: &Mesh, options: &EncodeOptions) -> Result<(Vec<Level>, Encod
         stats.total_s
     );
     Ok((levels, stats))
+}
+
+/// Encodes a mesh or a point cloud (see [`encode`] and [`cloud::encode_cloud`]).
+pub fn encode_exemplar(exemplar: &crate::io::exemplar::Exemplar, options: &EncodeOptions) -> Result<(Vec<Level>, EncodeStats), EncodeError> {
+    match exemplar {
+        crate::io::exemplar::Exemplar::Mesh(m) => encode(m, options),
+        crate::io::exemplar::Exemplar::Cloud(c) => cloud::encode_cloud(c, options, exemplar.format_up()),
+    }
 }
 
 /// Pools from the sampling level down to the coarsest resolution with point rule `G`,
@@ -724,17 +814,15 @@ fn closest_on_triangle(p: DVec3, t: &[DVec3; 3]) -> (DVec3, Feature) {
 }
 
 /// Where surface colour comes from, resolved once per mesh.
-enum ColourSource<'a> {
-    Constant(Vec3),
-    PerVertex(&'a [Vec3]),
-    PerCorner(&'a [Vec3]),
-    Texture(&'a Texture),
+struct ColourSource<'a> {
+    mesh: &'a Mesh,
+    default: Vec3,
 }
 
 impl<'a> ColourSource<'a> {
-    /// A texture takes precedence over colours (see [`Mesh::texture`]); an empty
-    /// texture image falls back to the colours with a warning; wrong array lengths
-    /// are errors.
+    /// The mesh's texture where it covers a triangle, else its colours, else
+    /// `default` ([`Mesh::colour_at`]); an empty texture image falls back to
+    /// the colours with a warning; wrong array lengths are errors.
     fn new(mesh: &'a Mesh, default: Vec3) -> Result<Self, EncodeError> {
         let invalid = |reason: String| EncodeError::InvalidMesh { name: mesh.name.clone(), reason };
         let corners = 3 * mesh.triangles.len();
@@ -742,43 +830,27 @@ impl<'a> ColourSource<'a> {
             if tex.uvs.len() != corners {
                 return Err(invalid(format!("{} texture UVs for {corners} triangle corners", tex.uvs.len())));
             }
-            if tex.image.width() > 0 && tex.image.height() > 0 {
-                return Ok(ColourSource::Texture(tex));
+            if !tex.triangle_image.is_empty() && tex.triangle_image.len() != mesh.triangles.len() {
+                return Err(invalid(format!("{} texture image indices for {} triangles", tex.triangle_image.len(), mesh.triangles.len())));
             }
-            log::warn!("{}: texture image is empty; ignoring it", mesh.name);
+            if !tex.has_pixels() {
+                log::warn!("{}: texture image is empty; ignoring it", mesh.name);
+            }
         }
-        Ok(match &mesh.colours {
-            MeshColours::None => ColourSource::Constant(default),
-            MeshColours::PerVertex(c) if c.len() == mesh.positions.len() => ColourSource::PerVertex(c),
-            MeshColours::PerCorner(c) if c.len() == corners => ColourSource::PerCorner(c),
-            MeshColours::PerVertex(c) => {
-                return Err(invalid(format!(
-                    "{} vertex colours for {} vertices",
-                    c.len(),
-                    mesh.positions.len()
-                )))
+        match &mesh.colours {
+            MeshColours::PerVertex(c) if c.len() != mesh.positions.len() => {
+                Err(invalid(format!("{} vertex colours for {} vertices", c.len(), mesh.positions.len())))
             }
-            MeshColours::PerCorner(c) => {
-                return Err(invalid(format!("{} corner colours for {corners} triangle corners", c.len())))
+            MeshColours::PerCorner(c) if c.len() != corners => {
+                Err(invalid(format!("{} corner colours for {corners} triangle corners", c.len())))
             }
-        })
+            _ => Ok(ColourSource { mesh, default }),
+        }
     }
 
-    /// Colour in [0, 1] at barycentric weights `w` of triangle `t` (vertices `tri`).
-    fn at(&self, t: usize, tri: &[u32; 3], w: DVec3) -> Vec3 {
-        let w = w.as_vec3();
-        let c = match self {
-            ColourSource::Constant(c) => *c,
-            ColourSource::PerVertex(c) => {
-                w.x * c[tri[0] as usize] + w.y * c[tri[1] as usize] + w.z * c[tri[2] as usize]
-            }
-            ColourSource::PerCorner(c) => w.x * c[3 * t] + w.y * c[3 * t + 1] + w.z * c[3 * t + 2],
-            ColourSource::Texture(tex) => {
-                let uv = w.x * tex.uvs[3 * t] + w.y * tex.uvs[3 * t + 1] + w.z * tex.uvs[3 * t + 2];
-                crate::geom::texture::sample_bilinear(&tex.image, uv).unwrap_or(Vec3::ZERO)
-            }
-        };
-        c.clamp(Vec3::ZERO, Vec3::ONE)
+    /// Colour in [0, 1] at barycentric weights `w` of triangle `t`.
+    fn at(&self, t: usize, _tri: &[u32; 3], w: DVec3) -> Vec3 {
+        self.mesh.colour_at(t, w.as_vec3()).unwrap_or(self.default).clamp(Vec3::ZERO, Vec3::ONE)
     }
 }
 
@@ -1078,6 +1150,7 @@ fn level_from_samples(samples: &[Sample], r: u32, frame: Frame) -> Level {
 mod tests {
     use super::*;
     use std::collections::HashSet;
+    use crate::io::mesh::Texture;
 
     use crate::util::rng::Rng;
 
@@ -1500,7 +1573,7 @@ mod tests {
         let triangles = vec![[0, 1, 2], [0, 2, 3]];
         let uvs = triangles.iter().flat_map(|t: &[u32; 3]| t.map(|v| uv_of(positions[v as usize]))).collect();
         let mut m = mesh(positions, triangles);
-        m.texture = Some(Texture { uvs, image });
+        m.texture = Some(Texture { uvs, image, ..Default::default() });
         let expected = |p: Vec3| {
             let uv = uv_of(p);
             let (px, py) = (uv.x * w as f32 - 0.5, (1.0 - uv.y) * h as f32 - 0.5);

@@ -2,5 +2,6 @@
 
 pub mod edges;
 pub mod nearest;
+pub mod normals;
 pub mod points;
 pub mod texture;

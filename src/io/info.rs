@@ -15,6 +15,15 @@ use crate::{io::mesh, io::vdb};
 pub enum FileInfo {
     Vdb(VdbInfo),
     Mesh(MeshInfo),
+    Cloud(CloudInfo),
+}
+
+/// A point cloud: its format, points, attributes, bounds and CRS.
+#[derive(Clone, Debug, Serialize)]
+pub struct CloudInfo {
+    pub path: String,
+    #[serde(flatten)]
+    pub summary: crate::io::cloud::CloudSummary,
 }
 
 /// An OpenVDB file: its grids, the transform and metadata of the first grid.
@@ -58,12 +67,15 @@ pub fn inspect(path: &Path) -> Result<FileInfo> {
     let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
     if ext == "vdb" {
         inspect_vdb(path).map(FileInfo::Vdb)
+    } else if crate::io::cloud::is_cloud_file(path) {
+        let c = crate::io::cloud::load(path)?;
+        Ok(FileInfo::Cloud(CloudInfo { path: path.display().to_string(), summary: c.summary() }))
     } else if mesh::MESH_EXTENSIONS.contains(&ext.as_str()) {
         let m = mesh::load(path)?;
         Ok(FileInfo::Mesh(MeshInfo { path: path.display().to_string(), summary: m.summary() }))
     } else {
         crate::util::fs::check_input_file(path)?;
-        Err(Error::file(path, format!("unknown file type '.{ext}' (expected .vdb or a mesh)")))
+        Err(Error::file(path, format!("unknown file type '.{ext}' (expected .vdb, a mesh or a point cloud)")))
     }
 }
 
@@ -109,6 +121,7 @@ impl FileInfo {
         match self {
             FileInfo::Vdb(v) => v.to_text(),
             FileInfo::Mesh(m) => m.to_text(),
+            FileInfo::Cloud(c) => c.to_text(),
         }
     }
 }
@@ -163,6 +176,21 @@ impl MeshInfo {
         if info.non_manifold_edges > 0 {
             let _ = writeln!(s, "  {} non-manifold edges", info.non_manifold_edges);
         }
+        s
+    }
+}
+
+impl CloudInfo {
+    fn to_text(&self) -> String {
+        let c = &self.summary;
+        let [x0, y0, z0] = c.bbox_min;
+        let [x1, y1, z1] = c.bbox_max;
+        let attributes = if c.attributes.is_empty() { "none".to_string() } else { c.attributes.join(", ") };
+        let mut s = format!(
+            "{}: point cloud ({}), {} points\n  bounds ({x0:.4}, {y0:.4}, {z0:.4}) - ({x1:.4}, {y1:.4}, {z1:.4})\n  attributes: {attributes}\n",
+            self.path, c.format, c.points
+        );
+        let _ = writeln!(s, "  crs: {}", c.crs.as_deref().unwrap_or("none given"));
         s
     }
 }

@@ -36,11 +36,46 @@ pub struct Mesh {
     pub texture: Option<Texture>,
 }
 
-/// A diffuse texture with per-corner UVs.
-#[derive(Clone, Debug)]
+/// A diffuse texture with per-corner UVs (OBJ convention: v = 0 is the
+/// image's bottom row).
+#[derive(Clone, Debug, Default)]
 pub struct Texture {
     pub uvs: Vec<Vec2>,
     pub image: image::RgbImage,
+    /// Wrap modes along u and v of `image` (OBJ: repeat).
+    pub wrap: [Wrap; 2],
+    /// Further images, for meshes whose materials differ (glTF), with their
+    /// wrap modes: triangle t samples `triangle_image[t]`, where 0 is `image`,
+    /// k > 0 is `more[k - 1]` and [`NO_IMAGE`] none (its colours alone).
+    /// Empty: every triangle samples `image`.
+    pub more: Vec<(image::RgbImage, [Wrap; 2])>,
+    pub triangle_image: Vec<u32>,
+    /// The texture is multiplied by the mesh's colours, in linear light
+    /// (glTF: baseColorFactor x COLOR_0 x texture); else it replaces them (OBJ).
+    pub tinted: bool,
+}
+
+pub use crate::geom::texture::Wrap;
+
+/// `Texture::triangle_image` of a triangle that samples no image.
+pub const NO_IMAGE: u32 = u32::MAX;
+
+impl Texture {
+    /// The texel colour at `uv` for triangle `t`: None where it has no image
+    /// (or an empty one), or `uv` is not finite.
+    pub fn sample(&self, t: usize, uv: Vec2) -> Option<Vec3> {
+        let (image, wrap) = match self.triangle_image.get(t).copied().unwrap_or(0) {
+            0 => (&self.image, self.wrap),
+            NO_IMAGE => return None,
+            k => self.more.get(k as usize - 1).map(|(i, w)| (i, *w))?,
+        };
+        crate::geom::texture::sample_bilinear_wrapped(image, uv, wrap)
+    }
+
+    /// True when some image has pixels.
+    pub fn has_pixels(&self) -> bool {
+        std::iter::once(&self.image).chain(self.more.iter().map(|m| &m.0)).any(|i| i.width() > 0 && i.height() > 0)
+    }
 }
 
 /// Mesh formats we read, by extension.
@@ -86,7 +121,11 @@ impl Mesh {
 
     pub fn colour_source(&self) -> String {
         if let Some(t) = &self.texture {
-            return format!("texture {}x{}", t.image.width(), t.image.height());
+            return if t.more.is_empty() {
+                format!("texture {}x{}", t.image.width(), t.image.height())
+            } else {
+                format!("{} textures, the first {}x{}", t.more.len() + 1, t.image.width(), t.image.height())
+            };
         }
         match &self.colours {
             MeshColours::None => "none (constant colour)".into(),
@@ -113,6 +152,29 @@ impl Mesh {
                 Some(sum.iter().zip(&count).map(|(s, &n)| *s / n.max(1) as f32).collect())
             }
         }
+    }
+
+    /// The surface colour at barycentric weights `w` of triangle `t`: the
+    /// texture where it covers the triangle (tinted by the colours where the
+    /// texture says so), else the interpolated colours; None for neither.
+    /// Array lengths must have been checked (the encoder and renderer do).
+    pub fn colour_at(&self, t: usize, w: Vec3) -> Option<Vec3> {
+        let tri = self.triangles[t];
+        let base = match &self.colours {
+            MeshColours::None => None,
+            MeshColours::PerVertex(c) => Some(w.x * c[tri[0] as usize] + w.y * c[tri[1] as usize] + w.z * c[tri[2] as usize]),
+            MeshColours::PerCorner(c) => Some(w.x * c[3 * t] + w.y * c[3 * t + 1] + w.z * c[3 * t + 2]),
+        };
+        if let Some(tex) = &self.texture {
+            let uv = w.x * tex.uvs[3 * t] + w.y * tex.uvs[3 * t + 1] + w.z * tex.uvs[3 * t + 2];
+            if let Some(c) = tex.sample(t, uv) {
+                return Some(match (tex.tinted, base) {
+                    (true, Some(b)) => crate::io::glb::tint(c, b),
+                    _ => c,
+                });
+            }
+        }
+        base
     }
 
     /// Area-weighted vertex normals, unit length; +Z for a vertex whose
@@ -286,7 +348,7 @@ fn from_bridge(path: &Path, data: bridge::MeshData) -> Result<Mesh> {
     } else {
         let uvs: Vec<Vec2> =
             corners(&data.corner_uvs, 2).chunks_exact(2).map(Vec2::from_slice).collect();
-        load_texture(path, &data).map(|image| Texture { uvs, image })
+        load_texture(path, &data).map(|image| Texture { uvs, image, ..Default::default() })
     };
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     Ok(Mesh { name, positions, triangles, colours, texture })

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::util::fs::{check_input_file, write_atomically};
 use crate::io::ffi::bridge::{self, GridSummary, LevelData, MetaEntry, MetaKind};
-use crate::level::{Frame, Level};
+use crate::level::{Frame, Level, Up};
 
 /// Where a level came from, recorded in its file.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -103,6 +103,7 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
             vec: level.frame.centre.to_array(),
         },
         meta_num("shapeshifter_scale", MetaKind::Float, level.frame.scale),
+        meta_str("shapeshifter_up", level.frame.up.name()),
         meta_str("shapeshifter_config_digest", &provenance.config_digest),
         meta_num("shapeshifter_exemplar_open", MetaKind::Int, provenance.exemplar_open as i32 as f64),
     ];
@@ -195,7 +196,8 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
     let mut level = Level {
         index: index as usize,
         resolution,
-        frame: Frame { centre, scale },
+        // Files written before the up axis was recorded are y-up.
+        frame: Frame { centre, scale, up: if find(&data.meta, "shapeshifter_up").is_some_and(|m| m.text == "z") { Up::Z } else { Up::Y } },
         coords: data.coords.chunks_exact(3).map(|c| IVec3::new(c[0], c[1], c[2])).collect(),
         normals: data.normals.chunks_exact(3).map(Vec3::from_slice).collect(),
         colours: data.colours.chunks_exact(3).map(Vec3::from_slice).collect(),

@@ -11,6 +11,7 @@ use crate::encode::{EncodeOptions, EncodeStats};
 use crate::error::{Error, Result};
 use crate::util::fs::write_file;
 use crate::level::Level;
+use crate::io::exemplar::Exemplar;
 use crate::io::mesh::Mesh;
 use crate::render::{self, RenderOptions};
 use crate::io::vdb::{self, Provenance, WriteOptions};
@@ -35,6 +36,9 @@ pub struct Manifest {
     /// SHA-256 of the source file's bytes (or of the generated mesh).
     pub source_sha256: String,
     pub triangles: usize,
+    /// Points of a point-cloud exemplar (vertices of a mesh).
+    #[serde(default)]
+    pub points: usize,
     /// The exemplar has boundary edges (meshing then prefers APSS).
     pub open_surface: bool,
     /// Normalisation: world = centre + normalised / scale.
@@ -77,7 +81,7 @@ pub fn level_file_name(index: usize) -> String {
 #[allow(clippy::too_many_arguments)]
 pub fn write(
     dir: &Path,
-    mesh: &Mesh,
+    exemplar: &Exemplar,
     source: &str,
     source_sha256: &str,
     levels: &[Level],
@@ -87,8 +91,8 @@ pub fn write(
     write: WriteOptions,
 ) -> Result<Manifest> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
-    let open_surface = !mesh.is_closed();
-    let provenance = Provenance { exemplar: mesh.name.clone(), exemplar_open: open_surface, ..Default::default() };
+    let open_surface = exemplar.is_open();
+    let provenance = Provenance { exemplar: exemplar.name().to_string(), exemplar_open: open_surface, ..Default::default() };
     let mut entries = Vec::new();
     for level in levels {
         let file = level_file_name(level.index);
@@ -114,10 +118,11 @@ pub fn write(
     .collect();
     let manifest = Manifest {
         creator: vdb::CREATOR.into(),
-        exemplar: mesh.name.clone(),
+        exemplar: exemplar.name().to_string(),
         source: source.into(),
         source_sha256: source_sha256.into(),
-        triangles: mesh.triangles.len(),
+        triangles: exemplar.counts().0,
+        points: exemplar.counts().1,
         open_surface,
         centre: frame.centre.to_array(),
         scale: frame.scale,

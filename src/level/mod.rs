@@ -12,18 +12,48 @@ use glam::{DVec3, IVec3, Vec3};
 
 /// Where the normalised cube [-1, 1]^3 sits in the exemplar's own frame.
 /// `world = centre + normalised / scale`; scale = 2 / (bbox diagonal), so the
-/// exemplar's bounding-box diagonal has length 2 after normalisation.
+/// exemplar's bounding-box diagonal has length 2 after normalisation, or
+/// (`encode --voxel-size`) whatever makes the finest voxel that many world units.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
     /// Bounding-box centre of the exemplar, world units.
     pub centre: DVec3,
     /// Normalised units per world unit.
     pub scale: f64,
+    /// The exemplar's vertical axis. Coordinates are never rotated (a level
+    /// file lands where its exemplar was); only cameras use it.
+    pub up: Up,
 }
 
 impl Default for Frame {
     fn default() -> Self {
-        Frame { centre: DVec3::ZERO, scale: 1.0 }
+        Frame { centre: DVec3::ZERO, scale: 1.0, up: Up::Y }
+    }
+}
+
+/// Which axis of an exemplar's own coordinates points up.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Up {
+    /// +Y (OBJ, glTF, Houdini, Maya).
+    #[default]
+    Y,
+    /// +Z (LAS/LAZ, E57, Blender, most CAD and GIS).
+    Z,
+}
+
+impl Up {
+    pub fn axis(self) -> Vec3 {
+        match self {
+            Up::Y => Vec3::Y,
+            Up::Z => Vec3::Z,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Up::Y => "y",
+            Up::Z => "z",
+        }
     }
 }
 

@@ -30,6 +30,7 @@ use crate::encode::{self, EncodeOptions};
 use crate::error::{Error, Result};
 use crate::util::fs::write_file;
 use crate::level::Level;
+use crate::io::exemplar::Exemplar;
 use crate::io::mesh::Mesh;
 use crate::render::{self, RenderOptions};
 use crate::learn::sample::{self, SampleOptions};
@@ -153,6 +154,14 @@ pub fn encode_options(config: &Config) -> EncodeOptions {
         coarsest_resolution: config.encode.coarsest_resolution,
         finest_resolution: config.encode.finest_resolution,
         pooling: config.encode.pooling,
+        voxel_size: config.encode.voxel_size,
+        up: config.encode.up,
+        cloud: crate::encode::CloudOptions {
+            colour: config.encode.cloud_colour,
+            normal_neighbours: config.encode.normal_neighbours,
+            orientation: config.encode.normal_orientation,
+            estimate_normals: config.encode.estimate_normals,
+        },
         ..Default::default()
     }
 }
@@ -166,11 +175,11 @@ pub fn encode_file(
     previews: Option<&RenderOptions>,
     write: WriteOptions,
 ) -> Result<dataset::Manifest> {
-    let mesh = crate::io::mesh::load(mesh_path)?;
+    let exemplar = Exemplar::load(mesh_path)?;
     let digest = dataset::file_sha256(mesh_path)?;
-    let (levels, stats) = encode::encode(&mesh, options).map_err(|e| Error::file(mesh_path, e.to_string()))?;
+    let (levels, stats) = encode::encode_exemplar(&exemplar, options).map_err(|e| Error::file(mesh_path, e.to_string()))?;
     let source = mesh_path.display().to_string();
-    let manifest = dataset::write(dir, &mesh, &source, &digest, &levels, options, &stats, previews, write)?;
+    let manifest = dataset::write(dir, &exemplar, &source, &digest, &levels, options, &stats, previews, write)?;
     log::info!(
         "encoded {source} in {:.2} s: {}",
         stats.total_s,
@@ -181,7 +190,7 @@ pub fn encode_file(
 
 /// Encodes `mesh` into `dir` unless already done with the same source and
 /// options. Returns the levels.
-pub fn encode_stage(mesh: &Mesh, source: &str, source_sha: &str, config: &Config, dir: &Path) -> Result<Vec<Level>> {
+pub fn encode_stage(exemplar: &Exemplar, source: &str, source_sha: &str, config: &Config, dir: &Path) -> Result<Vec<Level>> {
     let d = digest(&[source_sha, &config.stage_digest("encode")]);
     if is_done(dir, "encode", &d) {
         log::info!("encode: reusing {}", dir.display());
@@ -189,8 +198,8 @@ pub fn encode_stage(mesh: &Mesh, source: &str, source_sha: &str, config: &Config
     }
     let t = Instant::now();
     let options = encode_options(config);
-    let (levels, stats) = encode::encode(mesh, &options)?;
-    dataset::write(dir, mesh, source, source_sha, &levels, &options, &stats, Some(&render::preview_options()), config.output.write_options())?;
+    let (levels, stats) = encode::encode_exemplar(exemplar, &options)?;
+    dataset::write(dir, exemplar, source, source_sha, &levels, &options, &stats, Some(&render::preview_options()), config.output.write_options())?;
     log::info!(
         "encode: {} levels in {:.1} s ({})",
         levels.len(),
@@ -721,7 +730,8 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settin
                 if settings.glb {
                     crate::io::mesh::save(&mesh, &glb, true)?;
                 }
-                let img = render::render_mesh(&mesh, &render::preview_options())?;
+                let view = render::RenderOptions { up: Some(finest.frame.up), ..render::preview_options() };
+                let img = render::render_mesh(&mesh, &view)?;
                 render::save_png(&img, &dir.join("mesh.png"))?;
                 mark_done(dir, "mesh", &d, t.elapsed().as_secs_f64())?;
                 done += 1;
@@ -922,20 +932,20 @@ pub enum ExemplarSource<'a> {
 /// its levels.
 pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> Result<(String, Vec<Level>)> {
     let demo = matches!(source, ExemplarSource::Demo);
-    let (mesh, name, sha) = match source {
-        ExemplarSource::File(p) => (crate::io::mesh::load(p)?, p.display().to_string(), dataset::file_sha256(p)?),
+    let (exemplar, name, sha) = match source {
+        ExemplarSource::File(p) => (Exemplar::load(p)?, p.display().to_string(), dataset::file_sha256(p)?),
         ExemplarSource::Demo => {
             let m = crate::encode::exemplar::ruined_tower(&Default::default());
             let sha = dataset::mesh_sha256(&m);
-            (m, "(embedded demo exemplar)".to_string(), sha)
+            (Exemplar::Mesh(m), "(embedded demo exemplar)".to_string(), sha)
         }
     };
     record_config(&paths.root, config)?;
-    if demo {
-        crate::io::mesh::save(&mesh, &paths.root.join("exemplar.ply"), true)?;
-        render::save_png(&render::render_mesh(&mesh, &render::preview_options())?, &paths.root.join("exemplar.png"))?;
+    if let (true, Exemplar::Mesh(mesh)) = (demo, &exemplar) {
+        crate::io::mesh::save(mesh, &paths.root.join("exemplar.ply"), true)?;
+        render::save_png(&render::render_mesh(mesh, &render::preview_options())?, &paths.root.join("exemplar.png"))?;
     }
-    let levels = encode_stage(&mesh, &name, &sha, config, &paths.exemplar())?;
+    let levels = encode_stage(&exemplar, &name, &sha, config, &paths.exemplar())?;
     Ok((name, levels))
 }
 

@@ -61,6 +61,8 @@ pub fn contact_sheet(entries: &[(String, &Level)], opts: &SheetOptions) -> Resul
         azimuth_deg: opts.azimuth_deg,
         elevation_deg: opts.elevation_deg,
         fit_box: Some(fit_box),
+        // The reference's vertical axis: one camera for all.
+        up: Some(entries[0].1.frame.up),
         ..Default::default()
     };
     let centre = super::screen_fraction(0.5 * (ref_box.0 + ref_box.1), &base);

@@ -82,6 +82,9 @@ pub struct RenderOptions {
     /// Close-up: after framing, magnify by `factor` about the point at
     /// `centre` (fractions of the framed image's width and height, 0..1).
     pub zoom: Option<Zoom>,
+    /// The vertical axis of the world: the camera orbits it. None: the
+    /// data's own (a level's frame; +y for meshes and bare points).
+    pub up: Option<crate::level::Up>,
 }
 
 /// A close-up of a framed view.
@@ -102,6 +105,7 @@ impl Default for RenderOptions {
             background: [236, 236, 240],
             fit_box: None,
             zoom: None,
+            up: None,
         }
     }
 }
@@ -129,7 +133,8 @@ pub type Result<T> = std::result::Result<T, RenderError>;
 
 /// Renders a level's active voxels as lit splats (see [`render_points`]).
 pub fn render_level(level: &Level, opts: &RenderOptions) -> Result<RgbImage> {
-    render_points(&OrientedPoints::from_level(level), opts)
+    let opts = RenderOptions { up: opts.up.or(Some(level.frame.up)), ..opts.clone() };
+    render_points(&OrientedPoints::from_level(level), &opts)
 }
 
 /// Renders oriented points as z-buffered, lit screen-space disc splats of
@@ -209,13 +214,14 @@ pub fn render_mesh(mesh: &Mesh, opts: &RenderOptions) -> Result<RgbImage> {
         }
         _ => {}
     }
-    let texture = match &mesh.texture {
-        Some(t) if t.uvs.len() != 3 * nt => {
-            return Err(RenderError::Invalid(format!("{} texture UVs for {nt} triangles", t.uvs.len())))
+    if let Some(t) = &mesh.texture {
+        if t.uvs.len() != 3 * nt {
+            return Err(RenderError::Invalid(format!("{} texture UVs for {nt} triangles", t.uvs.len())));
         }
-        Some(t) if t.image.width() == 0 || t.image.height() == 0 => None,
-        other => other.as_ref(),
-    };
+        if !t.triangle_image.is_empty() && t.triangle_image.len() != nt {
+            return Err(RenderError::Invalid(format!("{} texture image indices for {nt} triangles", t.triangle_image.len())));
+        }
+    }
 
     let view = View::new(opts);
     let extents = Extents::of(&mesh.positions, &view);
@@ -245,20 +251,7 @@ pub fn render_mesh(mesh: &Mesh, opts: &RenderOptions) -> Result<RgbImage> {
         let tri = mesh.triangles[id];
         let [a, b, c] = tri.map(|v| screen[v as usize]);
         let wts = barycentric(a, b, c, Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
-        let colour = if let Some(t) = texture {
-            let uv = wts.x * t.uvs[3 * id] + wts.y * t.uvs[3 * id + 1] + wts.z * t.uvs[3 * id + 2];
-            crate::geom::texture::sample_bilinear(&t.image, uv).unwrap_or(MESH_GREY)
-        } else {
-            match &mesh.colours {
-                MeshColours::None => MESH_GREY,
-                MeshColours::PerVertex(c) => {
-                    wts.x * c[tri[0] as usize] + wts.y * c[tri[1] as usize] + wts.z * c[tri[2] as usize]
-                }
-                MeshColours::PerCorner(c) => {
-                    wts.x * c[3 * id] + wts.y * c[3 * id + 1] + wts.z * c[3 * id + 2]
-                }
-            }
-        };
+        let colour = mesh.colour_at(id, wts).unwrap_or(MESH_GREY);
         let [pa, pb, pc] = tri.map(|v| mesh.positions[v as usize]);
         shade((pb - pa).cross(pc - pa), colour, &view)
     }))
@@ -319,7 +312,13 @@ impl View {
         let up = back.cross(right);
         let k = KEY_LIGHT_VIEW.normalize();
         let key = (k.x * right + k.y * up + k.z * back).normalize();
-        View { right, up, back, key }
+        // The basis above is for a +y-up world; a +z-up world takes it
+        // rotated so that its +z plays +y (and its -y the front's +z).
+        let to_world = |v: Vec3| match opts.up.unwrap_or_default() {
+            crate::level::Up::Y => v,
+            crate::level::Up::Z => Vec3::new(v.x, -v.z, v.y),
+        };
+        View { right: to_world(right), up: to_world(up), back: to_world(back), key: to_world(key) }
     }
 }
 
@@ -785,7 +784,7 @@ mod tests {
     #[test]
     fn from_level_keeps_active_voxels_in_world_units() {
         let mut level = sphere_level(16, 0.8, Vec3::ONE);
-        level.frame = Frame { centre: DVec3::new(10.0, 0.0, -5.0), scale: 0.5 };
+        level.frame = Frame { centre: DVec3::new(10.0, 0.0, -5.0), scale: 0.5, ..Default::default() };
         level.mask[0] = -1.0;
         let points = OrientedPoints::from_level(&level);
         assert_eq!(points.len(), level.len() - 1);
@@ -827,7 +826,7 @@ mod tests {
         let mut mesh = cube(false);
         let image = RgbImage::from_pixel(4, 4, image::Rgb([20, 40, 230]));
         let uvs = vec![Vec2::new(0.3, 0.7); 3 * mesh.triangles.len()];
-        mesh.texture = Some(crate::io::mesh::Texture { uvs, image });
+        mesh.texture = Some(crate::io::mesh::Texture { uvs, image, ..Default::default() });
         let img = render_mesh(&mesh, &opts(100)).unwrap();
         let px = covered(&img);
         assert!(!px.is_empty());
