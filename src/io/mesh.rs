@@ -79,7 +79,7 @@ impl Texture {
 }
 
 /// Mesh formats we read, by extension.
-pub const MESH_EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl"];
+pub const MESH_EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb", "gltf"];
 
 /// Mesh formats [`save`] writes, by extension: the ones we read, and glTF binary.
 pub const WRITE_EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb"];
@@ -254,8 +254,18 @@ pub fn load(path: &Path) -> Result<Mesh> {
     if !MESH_EXTENSIONS.contains(&ext.as_str()) {
         return Err(Error::file(
             path,
-            format!("unsupported mesh format '.{ext}' (expected .obj, .ply, .off or .stl)"),
+            format!("unsupported mesh format '.{ext}' (expected .obj, .ply, .off, .stl, .glb or .gltf; point clouds: .las, .laz, .e57)"),
         ));
+    }
+    if ext == "glb" || ext == "gltf" {
+        // glTF is read in Rust (src/io/gltf_read.rs).
+        let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let mesh = std::panic::catch_unwind(|| crate::io::gltf_read::read(&bytes, dir, &name))
+            .map_err(|_| Error::file(path, "the glTF reader failed on this file (damaged)"))?
+            .map_err(|e| Error::file(path, e))?;
+        return check_mesh(path, mesh);
     }
     if ext == "obj" {
         // OBJ is read in Rust (src/io/obj.rs says why: OpenMesh's reader aborts
@@ -294,6 +304,54 @@ pub fn load(path: &Path) -> Result<Mesh> {
         }
     }
     from_bridge(path, data)
+}
+
+/// The checks [`from_bridge`] makes, on a mesh read in Rust: finite
+/// positions, degenerate triangles dropped (with their corners' colours,
+/// UVs and image indices) with a warning, some triangle left.
+fn check_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
+    if mesh.positions.is_empty() {
+        return Err(Error::file(path, "has no vertices"));
+    }
+    if let Some(i) = mesh.positions.iter().position(|p| !p.is_finite()) {
+        return Err(Error::file(path, format!("vertex {i} has a NaN or infinite coordinate")));
+    }
+    let p = &mesh.positions;
+    let keep: Vec<bool> = mesh
+        .triangles
+        .iter()
+        .map(|&[a, b, c]| a != b && b != c && a != c && (p[b as usize] - p[a as usize]).cross(p[c as usize] - p[a as usize]).length() > 0.0)
+        .collect();
+    let dropped = keep.iter().filter(|k| !**k).count();
+    if dropped == mesh.triangles.len() {
+        return Err(Error::file(path, format!("all {dropped} triangles are degenerate (zero area or repeated vertices)")));
+    }
+    if dropped > 0 {
+        log::warn!("{}: dropped {dropped} degenerate triangles", path.display());
+        let per_triangle = |v: &mut Vec<[u32; 3]>| {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().unwrap());
+        };
+        per_triangle(&mut mesh.triangles);
+        fn corners<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut i = 0;
+            v.retain(|_| {
+                i += 1;
+                keep[(i - 1) / 3]
+            });
+        }
+        if let MeshColours::PerCorner(c) = &mut mesh.colours {
+            corners(c, &keep);
+        }
+        if let Some(t) = &mut mesh.texture {
+            corners(&mut t.uvs, &keep);
+            if !t.triangle_image.is_empty() {
+                let mut k = keep.iter();
+                t.triangle_image.retain(|_| *k.next().unwrap());
+            }
+        }
+    }
+    Ok(mesh)
 }
 
 fn from_bridge(path: &Path, data: bridge::MeshData) -> Result<Mesh> {

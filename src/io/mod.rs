@@ -7,6 +7,7 @@ pub mod cloud;
 pub mod exemplar;
 pub(crate) mod ffi;
 pub mod glb;
+mod gltf_read;
 pub mod info;
 pub mod mesh;
 pub mod poisson;
