@@ -71,14 +71,16 @@ rust::Vec<MetaEntry> get_meta(const openvdb::GridBase &grid) {
   return out;
 }
 
-Vec3fGrid::Ptr vector_grid(const char *name, const LevelData &level, const rust::Vec<float> &values,
-                           openvdb::VecType type, openvdb::math::Transform::Ptr xform) {
-  auto grid = Vec3fGrid::create(openvdb::Vec3f(0.f));
+template <typename GridT, typename T>
+typename GridT::Ptr vector_grid(const char *name, const LevelData &level, const rust::Vec<T> &values,
+                                openvdb::VecType type, openvdb::math::Transform::Ptr xform) {
+  using V = typename GridT::ValueType;
+  auto grid = GridT::create(V(0));
   auto acc = grid->getAccessor();
   const size_t n = level.coords.size() / 3;
   for (size_t i = 0; i < n; ++i) {
     acc.setValue(Coord(level.coords[3 * i], level.coords[3 * i + 1], level.coords[3 * i + 2]),
-                 openvdb::Vec3f(values[3 * i], values[3 * i + 1], values[3 * i + 2]));
+                 V(values[3 * i], values[3 * i + 1], values[3 * i + 2]));
   }
   grid->setName(name);
   grid->setVectorType(type);
@@ -130,9 +132,13 @@ void write_level_file(rust::Str path, const LevelData &level, bool half_floats, 
     density->setTransform(xform);
     grids.push_back(mask);
     grids.push_back(density);
-    grids.push_back(vector_grid("P", level, level.points, openvdb::VEC_CONTRAVARIANT_ABSOLUTE, xform));
-    grids.push_back(vector_grid("N", level, level.normals, openvdb::VEC_COVARIANT_NORMALIZE, xform));
-    grids.push_back(vector_grid("Cd", level, level.colours, openvdb::VEC_INVARIANT, xform));
+    if (level.double_positions) {
+      grids.push_back(vector_grid<openvdb::Vec3DGrid>("P", level, level.points, openvdb::VEC_CONTRAVARIANT_ABSOLUTE, xform));
+    } else {
+      grids.push_back(vector_grid<Vec3fGrid>("P", level, level.points, openvdb::VEC_CONTRAVARIANT_ABSOLUTE, xform));
+    }
+    grids.push_back(vector_grid<Vec3fGrid>("N", level, level.normals, openvdb::VEC_COVARIANT_NORMALIZE, xform));
+    grids.push_back(vector_grid<Vec3fGrid>("Cd", level, level.colours, openvdb::VEC_INVARIANT, xform));
   }
   if (points) append_points_grid(grids, level, xform, half_floats);
   for (auto &grid : grids) {
@@ -148,6 +154,63 @@ void write_level_file(rust::Str path, const LevelData &level, bool half_floats, 
   archive.setCompression(compression);
   archive.write_file(std::string(path), grids);
 }
+
+namespace {
+// The features at the mask's voxels. A voxel the mask has and a feature grid
+// lacks would read as the grid's background (a point at the origin), so it is
+// refused; voxels only the feature grids have carry nothing the level uses
+// and are counted (the caller warns).
+template <typename PGrid>
+void read_features(const FloatGrid &mask, const PGrid &P, const Vec3fGrid &N, const Vec3fGrid &Cd,
+                   LevelData &out) {
+  const size_t n = mask.activeVoxelCount();
+  out.coords.reserve(3 * n);
+  out.points.reserve(3 * n);
+  out.normals.reserve(3 * n);
+  out.colours.reserve(3 * n);
+  out.mask.reserve(n);
+  auto pacc = P.getConstAccessor();
+  auto nacc = N.getConstAccessor();
+  auto cacc = Cd.getConstAccessor();
+  for (auto it = mask.cbeginValueOn(); it; ++it) {
+    if (!it.isVoxelValue())
+      throw std::runtime_error("has tiles in its mask grid; expected single voxels");
+    const Coord ijk = it.getCoord();
+    const std::pair<const char *, bool> on[] = {
+        {"P", pacc.isValueOn(ijk)}, {"N", nacc.isValueOn(ijk)}, {"Cd", cacc.isValueOn(ijk)}};
+    for (const auto &[name, active] : on) {
+      if (!active)
+        throw std::runtime_error("voxel (" + std::to_string(ijk[0]) + "," + std::to_string(ijk[1]) +
+                                 "," + std::to_string(ijk[2]) + ") is active in grid 'mask' but not in '" +
+                                 name + "': its grids disagree (edited by another tool?)");
+    }
+    for (int k = 0; k < 3; ++k) out.coords.push_back(ijk[k]);
+    out.mask.push_back(*it);
+    const auto p = pacc.getValue(ijk);
+    const auto nn = nacc.getValue(ijk), c = cacc.getValue(ijk);
+    for (int k = 0; k < 3; ++k) {
+      out.points.push_back(double(p[k]));
+      out.normals.push_back(nn[k]);
+      out.colours.push_back(c[k]);
+    }
+  }
+  auto macc = mask.getConstAccessor();
+  uint64_t unmatched = 0;
+  auto count = [&](const auto &grid) {
+    for (auto it = grid.cbeginValueOn(); it; ++it) {
+      if (!it.isVoxelValue()) {
+        unmatched += it.getVoxelCount();
+      } else if (!macc.isValueOn(it.getCoord())) {
+        ++unmatched;
+      }
+    }
+  };
+  count(P);
+  count(N);
+  count(Cd);
+  out.unmatched_voxels = unmatched;
+}
+} // namespace
 
 LevelData read_level_file(rust::Str path) {
   const std::string file_name(path);
@@ -167,10 +230,12 @@ LevelData read_level_file(rust::Str path) {
     return out;
   });
   auto mask = openvdb::GridBase::grid<FloatGrid>(grids[0]);
-  auto P = openvdb::GridBase::grid<Vec3fGrid>(grids[1]);
+  // P is vec3s, or vec3d for georeferenced levels.
+  auto Pd = openvdb::GridBase::grid<openvdb::Vec3DGrid>(grids[1]);
+  auto Pf = openvdb::GridBase::grid<Vec3fGrid>(grids[1]);
   auto N = openvdb::GridBase::grid<Vec3fGrid>(grids[2]);
   auto Cd = openvdb::GridBase::grid<Vec3fGrid>(grids[3]);
-  if (!mask || !P || !N || !Cd)
+  if (!mask || !(Pd || Pf) || !N || !Cd)
     throw std::runtime_error("has grids mask/P/N/Cd of the wrong value types");
   const auto &xform = mask->transform();
   if (!xform.isLinear() || !xform.hasUniformScale())
@@ -181,51 +246,12 @@ LevelData read_level_file(rust::Str path) {
   const auto o = xform.indexToWorld(openvdb::Vec3d(0.0));
   out.origin = {o[0], o[1], o[2]};
   out.meta = get_meta(*mask);
-  const size_t n = mask->activeVoxelCount();
-  out.coords.reserve(3 * n);
-  out.points.reserve(3 * n);
-  out.normals.reserve(3 * n);
-  out.colours.reserve(3 * n);
-  out.mask.reserve(n);
-  auto pacc = P->getConstAccessor();
-  auto nacc = N->getConstAccessor();
-  auto cacc = Cd->getConstAccessor();
-  // The features come from P, N and Cd at the mask's voxels: a voxel the mask
-  // has and a feature grid lacks would read as the grid's background (a point
-  // at the origin), so it is refused; voxels only the feature grids have
-  // carry nothing the level uses and are counted (the caller warns).
-  const std::pair<const char *, decltype(pacc) *> features[] = {{"P", &pacc}, {"N", &nacc}, {"Cd", &cacc}};
-  for (auto it = mask->cbeginValueOn(); it; ++it) {
-    if (!it.isVoxelValue())
-      throw std::runtime_error("has tiles in its mask grid; expected single voxels");
-    const Coord ijk = it.getCoord();
-    for (const auto &[name, acc] : features) {
-      if (!acc->isValueOn(ijk))
-        throw std::runtime_error("voxel (" + std::to_string(ijk[0]) + "," + std::to_string(ijk[1]) +
-                                 "," + std::to_string(ijk[2]) + ") is active in grid 'mask' but not in '" +
-                                 name + "': its grids disagree (edited by another tool?)");
-    }
-    for (int k = 0; k < 3; ++k) out.coords.push_back(ijk[k]);
-    out.mask.push_back(*it);
-    const auto p = pacc.getValue(ijk), nn = nacc.getValue(ijk), c = cacc.getValue(ijk);
-    for (int k = 0; k < 3; ++k) {
-      out.points.push_back(p[k]);
-      out.normals.push_back(nn[k]);
-      out.colours.push_back(c[k]);
-    }
+  out.double_positions = bool(Pd);
+  if (Pd) {
+    read_features(*mask, *Pd, *N, *Cd, out);
+  } else {
+    read_features(*mask, *Pf, *N, *Cd, out);
   }
-  auto macc = mask->getConstAccessor();
-  uint64_t unmatched = 0;
-  for (const auto *grid : {P.get(), N.get(), Cd.get()}) {
-    for (auto it = grid->cbeginValueOn(); it; ++it) {
-      if (!it.isVoxelValue()) {
-        unmatched += it.getVoxelCount();
-      } else if (!macc.isValueOn(it.getCoord())) {
-        ++unmatched;
-      }
-    }
-  }
-  out.unmatched_voxels = unmatched;
   return out;
 }
 

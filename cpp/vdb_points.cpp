@@ -10,10 +10,10 @@
 
 namespace shapeshifter {
 namespace {
-std::vector<openvdb::Vec3f> as_vec3(const rust::Vec<float> &flat) {
-  std::vector<openvdb::Vec3f> out(flat.size() / 3);
+template <typename V, typename T> std::vector<V> as_vec3(const rust::Vec<T> &flat) {
+  std::vector<V> out(flat.size() / 3);
   for (size_t i = 0; i < out.size(); ++i)
-    out[i] = openvdb::Vec3f(flat[3 * i], flat[3 * i + 1], flat[3 * i + 2]);
+    out[i] = V(flat[3 * i], flat[3 * i + 1], flat[3 * i + 2]);
   return out;
 }
 } // namespace
@@ -22,9 +22,12 @@ void append_points_grid(openvdb::GridPtrVec &grids, const LevelData &level,
                         openvdb::math::Transform::Ptr xform, bool half_floats) {
   using namespace openvdb::points;
   // Only voxels that hold surface (mask > 0) become points.
-  std::vector<openvdb::Vec3f> positions, normals, colours;
-  const auto all_p = as_vec3(level.points), all_n = as_vec3(level.normals),
-             all_c = as_vec3(level.colours);
+  // Positions in double: the point grid stores them relative to their voxel,
+  // so georeferenced coordinates keep their precision.
+  std::vector<openvdb::Vec3d> positions;
+  std::vector<openvdb::Vec3f> normals, colours;
+  const auto all_p = as_vec3<openvdb::Vec3d>(level.points);
+  const auto all_n = as_vec3<openvdb::Vec3f>(level.normals), all_c = as_vec3<openvdb::Vec3f>(level.colours);
   for (size_t i = 0; i < level.mask.size(); ++i) {
     if (level.mask[i] > 0.f) {
       positions.push_back(all_p[i]);
@@ -32,7 +35,7 @@ void append_points_grid(openvdb::GridPtrVec &grids, const LevelData &level,
       colours.push_back(all_c[i]);
     }
   }
-  PointAttributeVector<openvdb::Vec3f> pos_wrapper(positions);
+  PointAttributeVector<openvdb::Vec3d> pos_wrapper(positions);
   auto index_grid = openvdb::tools::createPointIndexGrid<openvdb::tools::PointIndexGrid>(
       pos_wrapper, *xform);
   PointDataGrid::Ptr points;

@@ -79,8 +79,12 @@ pub mod bridge {
     /// `origin + (i,j,k) * voxel_size` in the exemplar's frame (world units).
     pub struct LevelData {
         pub coords: Vec<i32>,
-        /// world positions P, 3 per voxel
-        pub points: Vec<f32>,
+        /// world positions P, 3 per voxel (f64: georeferenced coordinates
+        /// in the millions of metres keep their centimetres)
+        pub points: Vec<f64>,
+        /// Write P as vec3d (float32 would round the positions by more than
+        /// a 64th of a voxel); read: P was vec3d.
+        pub double_positions: bool,
         pub normals: Vec<f32>,
         pub colours: Vec<f32>,
         pub mask: Vec<f32>,

@@ -124,9 +124,16 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
     }
     let flat = |v: &[Vec3]| -> Vec<f32> { v.iter().flat_map(|p| p.to_array()).collect() };
     let normals: Vec<Vec3> = level.normals.iter().map(|n| n.normalize_or_zero()).collect();
+    let points: Vec<f64> = (0..level.len()).flat_map(|i| level.point_world(i).to_array()).collect();
+    // float32 holds a coordinate x to x * 2^-24: past voxel * 2^17 that is
+    // more than a 64th of a voxel (a UTM tile at 0.2 m voxels, 4e6 m north),
+    // so P is written in double there, float elsewhere (what most tools expect).
+    let largest = points.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let double_positions = largest > voxel_size * (1u64 << 17) as f64;
     let data = LevelData {
         coords: level.coords.iter().flat_map(|c| c.to_array()).collect(),
-        points: (0..level.len()).flat_map(|i| level.point_world(i).as_vec3().to_array()).collect(),
+        points,
+        double_positions,
         normals: flat(&normals),
         colours: flat(&level.colours),
         mask: level.mask.clone(),
@@ -208,8 +215,7 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
     let voxel_world = level.voxel_size() / scale;
     for (i, p) in data.points.chunks_exact(3).enumerate() {
         let centre_world = origin + level.coords[i].as_dvec3() * voxel_world;
-        let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-        let offset = (p - centre_world) / voxel_world;
+        let offset = (DVec3::from_slice(p) - centre_world) / voxel_world;
         // A point belongs inside its voxel ([-0.5, 0.5] voxels; half floats
         // round a world position by up to about 0.15 voxels at 256^3): past
         // one voxel, P does not describe this voxel and would become a
