@@ -186,6 +186,6 @@ mod tests {
         assert_eq!(finest.frame.up, Up::Z);
         let too_fine = EncodeOptions { voxel_size: Some(0.2), ..small() };
         let e = encode_cloud(&cloud, &too_fine, Up::Z).unwrap_err().to_string();
-        assert!(e.contains("--voxel-size 0.3") && e.contains("20.0"), "{e}");
+        assert!(e.contains("use --voxel-size 0.3") && e.contains("at a voxel size of 0.2"), "{e}");
     }
 }

@@ -3,7 +3,9 @@
 //! consistent by propagation along a minimum spanning tree of the neighbour
 //! graph (Hoppe et al. 1992): an edge costs 1 - |n_i . n_j|, so the signs
 //! travel first across flat regions and last across creases. Each connected
-//! part is seeded at its highest point (along `up`), its normal pointing up.
+//! part of the graph is seeded at its highest point (along `up`), its normal
+//! pointing away from the whole cloud's centroid there: up on the top of an
+//! object or a terrain, down under the separate bottom of one.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -17,8 +19,8 @@ use rayon::prelude::*;
 #[serde(rename_all = "lowercase")]
 pub enum Orientation {
     /// Propagated along the neighbour graph's minimum spanning tree, each
-    /// part seeded pointing up at its highest point: closed objects and
-    /// terrain with walls alike.
+    /// part seeded at its highest point, pointing away from the centroid:
+    /// closed objects and terrain with walls alike.
     #[default]
     Graph,
     /// Every normal towards +up (height fields: terrain, facades seen from above).
@@ -188,14 +190,18 @@ fn propagate(points: &[Vec3], neighbours: &[Vec<u32>], normals: &mut [Vec3], up:
     }
     let mut by_height: Vec<u32> = (0..n as u32).collect();
     by_height.sort_by(|&a, &b| points[b as usize].dot(up).total_cmp(&points[a as usize].dot(up)));
+    let centroid = (points.iter().fold(DVec3::ZERO, |s, p| s + p.as_dvec3()) / n as f64).as_vec3();
     let mut reached = vec![false; n];
     let mut heap = BinaryHeap::new();
     for &seed in &by_height {
         if reached[seed as usize] {
             continue;
         }
-        if normals[seed as usize].dot(up) < 0.0 {
-            normals[seed as usize] = -normals[seed as usize];
+        let s = seed as usize;
+        let away = points[s] - centroid;
+        let outward = if normals[s].dot(away).abs() > 1e-3 * away.length() { away } else { up };
+        if normals[s].dot(outward) < 0.0 {
+            normals[s] = -normals[s];
         }
         reached[seed as usize] = true;
         let push = |heap: &mut BinaryHeap<Edge>, i: u32, normals: &[Vec3], reached: &[bool]| {

@@ -3,3 +3,4 @@
 
 pub mod shapes;
 pub mod synthetic;
+pub mod clouds;

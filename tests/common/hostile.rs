@@ -98,6 +98,53 @@ pub fn textured_obj(mesh: &shapeshifter::io::mesh::Mesh) -> Vec<(String, Vec<u8>
     vec![("seed.obj".into(), obj.into_bytes()), ("seed.mtl".into(), mtl.into()), ("seed.png".into(), png)]
 }
 
+/// A glTF with its buffer and PNG texture beside it (base colour factor,
+/// texture with a sampler, UVs, indices): every part of the glTF reader's path.
+pub fn textured_gltf(mesh: &shapeshifter::io::mesh::Mesh) -> Vec<(String, Vec<u8>)> {
+    let mut bin = Vec::new();
+    for p in &mesh.positions {
+        p.to_array().iter().for_each(|v| bin.extend_from_slice(&v.to_le_bytes()));
+    }
+    let uv_at = bin.len();
+    for p in &mesh.positions {
+        [p.x.atan2(p.y) / std::f32::consts::TAU + 0.5, p.z * 0.5 + 0.5].iter().for_each(|v| bin.extend_from_slice(&v.to_le_bytes()));
+    }
+    let idx_at = bin.len();
+    for v in mesh.triangles.iter().flatten() {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let (lo, hi) = mesh.bounds();
+    let n = mesh.positions.len();
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
+"nodes":[{{"mesh":0,"translation":[1,2,3]}}],
+"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0,"TEXCOORD_0":1}},"indices":2,"material":0}}]}}],
+"materials":[{{"pbrMetallicRoughness":{{"baseColorFactor":[1,0.8,0.6,1],"baseColorTexture":{{"index":0}}}}}}],
+"textures":[{{"source":0,"sampler":0}}],"samplers":[{{"wrapS":33648,"wrapT":33071}}],"images":[{{"uri":"seed.png"}}],
+"buffers":[{{"uri":"seed.bin","byteLength":{len}}}],
+"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{uv_at}}},{{"buffer":0,"byteOffset":{uv_at},"byteLength":{uvl}}},{{"buffer":0,"byteOffset":{idx_at},"byteLength":{il}}}],
+"accessors":[{{"bufferView":0,"componentType":5126,"count":{n},"type":"VEC3","min":[{},{},{}],"max":[{},{},{}]}},
+{{"bufferView":1,"componentType":5126,"count":{n},"type":"VEC2"}},
+{{"bufferView":2,"componentType":5125,"count":{ni},"type":"SCALAR"}}]}}"#,
+        lo.x, lo.y, lo.z, hi.x, hi.y, hi.z,
+        len = bin.len(),
+        uvl = idx_at - uv_at,
+        il = bin.len() - idx_at,
+        ni = 3 * mesh.triangles.len(),
+    );
+    let img = image::RgbImage::from_fn(8, 8, |x, y| image::Rgb([(x * 32) as u8, (y * 32) as u8, 128]));
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).expect("png encodes");
+    vec![("seed.gltf".into(), json.into_bytes()), ("seed.bin".into(), bin), ("seed.png".into(), png)]
+}
+
+/// Points on the small sphere (its vertices, a few hundred) with colours.
+fn cloud_points(mesh: &shapeshifter::io::mesh::Mesh) -> (Vec<glam::DVec3>, Vec<Vec3>) {
+    let p: Vec<glam::DVec3> = mesh.positions.iter().map(|p| p.as_dvec3() * 10.0 + glam::DVec3::new(1000.0, 2000.0, 50.0)).collect();
+    let c = mesh.positions.iter().map(|p| (*p * 0.4 + 0.5).clamp(Vec3::ZERO, Vec3::ONE)).collect();
+    (p, c)
+}
+
 /// A level of about `n` voxels on a sphere of radius 20 voxels.
 pub fn sphere_level(n: usize) -> shapeshifter::level::Level {
     let mut level = shapeshifter::level::Level { index: 1, resolution: 64, ..Default::default() };
@@ -132,8 +179,30 @@ pub fn builtin_seeds(scratch: &Path) -> Vec<Seed> {
         Seed { format: "ply-ascii".into(), files: vec![("seed.ply".into(), saved(&sphere, scratch, "a.ply", false))], mutable: vec![0], commands: info.clone() },
         Seed { format: "off".into(), files: vec![("seed.off".into(), saved(&sphere, scratch, "s.off", false))], mutable: vec![0], commands: info.clone() },
         Seed { format: "stl-binary".into(), files: vec![("seed.stl".into(), saved(&sphere, scratch, "b.stl", true))], mutable: vec![0], commands: info.clone() },
-        Seed { format: "stl-ascii".into(), files: vec![("seed.stl".into(), saved(&sphere, scratch, "a.stl", false))], mutable: vec![0], commands: info },
+        Seed { format: "stl-ascii".into(), files: vec![("seed.stl".into(), saved(&sphere, scratch, "a.stl", false))], mutable: vec![0], commands: info.clone() },
+        Seed { format: "glb".into(), files: vec![("seed.glb".into(), saved(&sphere, scratch, "s.glb", true))], mutable: vec![0], commands: mesh_cmds.clone() },
+        Seed { format: "gltf+bin+png".into(), files: textured_gltf(&sphere), mutable: vec![0, 0, 1, 1, 2], commands: mesh_cmds.clone() },
     ];
+    // Point clouds: `info` and an encode at the smallest resolutions (the
+    // normal estimation and the binning run on whatever was read).
+    let encode = args(&["encode", "{in}", "-o", "{out}/e", "--coarsest", "16", "--finest", "16", "--sampling-resolution", "32"]);
+    let cloud_cmds = vec![args(&["info", "{in}"]), encode];
+    let (p, c) = cloud_points(&sphere);
+    let normals: Vec<Vec3> = sphere.vertex_normals();
+    let pf: Vec<Vec3> = p.iter().map(|q| q.as_vec3()).collect();
+    let ply = scratch.join("points.ply");
+    shapeshifter::io::mesh::save_points_ply(&ply, &pf, &normals, &c).expect("seed points write");
+    let n = p.len();
+    let intensity: Vec<u16> = (0..n).map(|i| (i * 37 % 65536) as u16).collect();
+    let classes: Vec<u8> = (0..n).map(|i| [2u8, 5, 6][i % 3]).collect();
+    let (las, laz, e57) = (scratch.join("s.las"), scratch.join("s.laz"), scratch.join("s.e57"));
+    shapeshifter::testing::clouds::write_las(&las, &p, Some(&c), &intensity, &classes, Some("PROJCS[\"seed\",AUTHORITY[\"EPSG\",\"32632\"]]")).expect("seed LAS writes");
+    shapeshifter::testing::clouds::write_las(&laz, &p, None, &intensity, &classes, None).expect("seed LAZ writes");
+    let unit: Vec<f32> = intensity.iter().map(|&i| i as f32 / 65535.0).collect();
+    shapeshifter::testing::clouds::write_e57(&e57, &p, Some(&c), &unit).expect("seed E57 writes");
+    for (format, name, path) in [("ply-points", "seed.ply", &ply), ("las", "seed.las", &las), ("laz", "seed.laz", &laz), ("e57", "seed.e57", &e57)] {
+        seeds.push(Seed { format: format.into(), files: vec![(name.into(), std::fs::read(path).expect("seed reads back"))], mutable: vec![0], commands: cloud_cmds.clone() });
+    }
     let level_path = scratch.join("level_1.vdb");
     shapeshifter::io::vdb::write_level(
         &level_path,

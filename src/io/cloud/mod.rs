@@ -209,6 +209,13 @@ fn check(c: &PointCloud) -> std::result::Result<(), String> {
     if let Some(i) = c.positions.iter().position(|p| !p.is_finite()) {
         return Err(format!("point {i} has a NaN or infinite coordinate"));
     }
+    // Neighbour searches work in f32 about the centre: a span past 1e9 units
+    // (a damaged scale or offset, not a scan) would lose every point.
+    let (lo, hi) = c.bounds();
+    let span = (hi - lo).max_element();
+    if !(span <= 1e9) {
+        return Err(format!("its points span {span:e} units (a damaged scale or offset?)"));
+    }
     let n = c.len();
     let a = &c.attributes;
     for (what, len) in [
