@@ -26,6 +26,17 @@ fn assimp_gltf(rel: &str) -> Option<PathBuf> {
     Some(p)
 }
 
+/// The JSON of a .gltf, or of a .glb's first chunk.
+fn json_of(path: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(path).unwrap();
+    if bytes.starts_with(b"glTF") {
+        let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        serde_json::from_slice(&bytes[20..20 + len]).unwrap()
+    } else {
+        serde_json::from_slice(&bytes).unwrap()
+    }
+}
+
 fn small() -> EncodeOptions {
     EncodeOptions { sampling_resolution: 128, coarsest_resolution: 16, finest_resolution: 64, ..Default::default() }
 }
@@ -58,11 +69,31 @@ fn the_textured_box_reads_alike_from_gltf_glb_and_embedded_gltf() {
         assert_eq!(t.image.as_raw(), png.as_raw(), "{f}: the decoded texture is the PNG");
         assert_eq!(m.positions, meshes[0].positions, "{f}");
         // At each triangle's centroid: the PNG's pixel at the UV, sampled by
-        // hand in glTF's own convention (v down the image).
+        // hand in glTF's own convention (v down the image) with the sampler
+        // the file declares (u runs to 6: the .gltf mirrors it and clamps v,
+        // the .glb repeats both).
+        let json = json_of(&dir.join(f));
+        let mode = |k: &str| json["samplers"][0][k].as_u64().unwrap_or(10497);
+        let wrap_of = |m: u64| match m {
+            33648 => mesh::Wrap::MirroredRepeat,
+            33071 => mesh::Wrap::ClampToEdge,
+            _ => mesh::Wrap::Repeat,
+        };
+        assert_eq!(t.wrap, [wrap_of(mode("wrapS")), wrap_of(mode("wrapT"))], "{f}");
+        let by_hand = |x: f32, m: u64| match m {
+            33648 => {
+                let r = x.rem_euclid(2.0);
+                if r > 1.0 { 2.0 - r } else { r }
+            }
+            33071 => x.clamp(0.0, 1.0),
+            _ => x.rem_euclid(1.0),
+        };
         for ti in 0..m.triangles.len() {
             let w = Vec3::splat(1.0 / 3.0);
             let uv = (t.uvs[3 * ti] + t.uvs[3 * ti + 1] + t.uvs[3 * ti + 2]) / 3.0;
-            let (x, y) = ((uv.x * png.width() as f32) as u32, ((1.0 - uv.y) * png.height() as f32) as u32);
+            // Back to glTF's v before wrapping it.
+            let (u, v) = (by_hand(uv.x, mode("wrapS")), by_hand(1.0 - uv.y, mode("wrapT")));
+            let (x, y) = ((u * png.width() as f32) as u32, (v * png.height() as f32) as u32);
             let px = png.get_pixel(x.min(png.width() - 1), y.min(png.height() - 1)).0;
             let want = Vec3::new(px[0] as f32, px[1] as f32, px[2] as f32) / 255.0;
             let got = m.colour_at(ti, w).unwrap();
@@ -104,15 +135,22 @@ fn strips_and_fans_make_the_same_square_and_points_alone_are_refused() {
 #[test]
 fn a_multi_node_engine_reads_every_primitive_in_place() {
     let Some(path) = assimp_gltf("2CylinderEngine-glTF-Binary/2CylinderEngine.glb") else { return };
-    let bytes = std::fs::read(&path).unwrap();
-    let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-    let json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + len]).unwrap();
-    let mut declared = 0;
-    for m in json["meshes"].as_array().unwrap() {
-        for p in m["primitives"].as_array().unwrap() {
-            declared += json["accessors"][p["indices"].as_u64().unwrap() as usize]["count"].as_u64().unwrap() / 3;
-        }
+    let json = json_of(&path);
+    // Triangles per mesh, counted once per node that instances it.
+    let per_mesh: Vec<u64> = json["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["primitives"].as_array().unwrap().iter().map(|p| json["accessors"][p["indices"].as_u64().unwrap() as usize]["count"].as_u64().unwrap() / 3).sum())
+        .collect();
+    fn count(json: &serde_json::Value, node: usize, per_mesh: &[u64]) -> u64 {
+        let n = &json["nodes"][node];
+        n["mesh"].as_u64().map_or(0, |m| per_mesh[m as usize])
+            + n["children"].as_array().map_or(0, |c| c.iter().map(|k| count(json, k.as_u64().unwrap() as usize, per_mesh)).sum())
     }
+    let scene = &json["scenes"][json["scene"].as_u64().unwrap_or(0) as usize];
+    let declared: u64 = scene["nodes"].as_array().unwrap().iter().map(|k| count(&json, k.as_u64().unwrap() as usize, &per_mesh)).sum();
+    assert!(declared > per_mesh.iter().sum::<u64>(), "some meshes are instanced more than once");
     let m = mesh::load(&path).unwrap();
     // Degenerate triangles (a repeated index, zero area) are dropped.
     assert!(m.triangles.len() as u64 <= declared && m.triangles.len() as u64 > declared * 8 / 10, "{} of {declared}", m.triangles.len());
@@ -236,8 +274,10 @@ fn las_laz_and_e57_read_back_and_encode() {
     assert!(o.status.success() && text.contains("40000 points") && text.contains("EPSG:32632") && text.contains("rgb, intensity, classification"), "{text}");
 }
 
-/// `points` output read back as an exemplar: the same voxels as the level
-/// it came from (its normals and colours used as they are).
+/// `points` output read back as an exemplar: the voxels of the level it came
+/// from (its normals and colours used as they are). Not all of them: a point
+/// clamped onto its voxel's face (the mesh encoder's QEM points) bins into
+/// the neighbour, which has its own point; none lands anywhere else.
 #[test]
 fn our_points_ply_encodes_to_the_level_it_came_from() {
     let dir = tempfile::tempdir().unwrap();
@@ -255,7 +295,8 @@ fn our_points_ply_encodes_to_the_level_it_came_from() {
     let a: std::collections::HashSet<_> = level.coords.iter().collect();
     let b: std::collections::HashSet<_> = back.coords.iter().collect();
     let common = a.intersection(&b).count();
-    assert!(common as f64 > 0.97 * a.len() as f64 && (b.len() as f64) < 1.03 * a.len() as f64, "{} / {} / {common}", a.len(), b.len());
+    assert_eq!(common, b.len(), "every re-encoded voxel is one of the level's");
+    assert!(common as f64 > 0.85 * a.len() as f64, "{common} of {} voxels", a.len());
 }
 
 /// A LiDAR-like tile in UTM metres at 0.2 m voxels: the level file lands
