@@ -8,7 +8,9 @@
 # - Blender (headless): imports every level file as a volume object (grid
 #   names and types, bounds on top of the exemplar mesh), and every mesh we
 #   write (.ply and .glb, vertex colours present);
-# - Chromium (headless): opens report.html, every image decodes; a screenshot.
+# - Chromium (headless): opens report.html, every image decodes; a screenshot;
+# - exemplars written by Open3D, laspy (+lazrs), pye57 and Blender's glTF
+#   exporter read and encoded (scripts/interop-inputs.sh).
 # Installs blender, chromium and libopenvdb-tools from Debian when missing.
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -81,4 +83,6 @@ k=${loaded%/*}; n=${loaded#*/}
 "${CHROME[@]}" --window-size=1280,2400 --screenshot="$OUT/report_screenshot.png" "file://$REPORT" 2> /dev/null
 [ -s "$OUT/report_screenshot.png" ] || { echo "interop: no screenshot" >&2; exit 1; }
 echo "interop: chromium opened report.html: $loaded images loaded; screenshot $OUT/report_screenshot.png"
+# --- Exemplars written by other tools ------------------------------------------
+bash "$ROOT/scripts/interop-inputs.sh" "$WORK"
 echo "interop: all checks passed"
