@@ -1,14 +1,12 @@
 //! Normals for point clouds that have none: a plane fitted to each point's
 //! k nearest neighbours (the covariance's least eigenvector), then signs made
 //! consistent by propagation along a minimum spanning tree of the neighbour
-//! graph (Hoppe et al. 1992): an edge costs 1 - |n_i . n_j|, so the signs
-//! travel first across flat regions and last across creases. Each connected
-//! part of the graph is seeded at its highest point (along `up`), its normal
+//! graph (Hoppe et al. 1992; Kruskal's, the edges sorted in parallel): an
+//! edge costs 1 - |n_i . n_j|, so the signs travel first across flat regions
+//! and last across creases. Each connected part of the graph is seeded at its highest point (along `up`), its normal
 //! pointing away from the whole cloud's centroid there: up on the top of an
 //! object or a terrain, down under the separate bottom of one.
 
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 use std::num::NonZero;
 
 use glam::{DMat3, DVec3, Vec3};
@@ -39,6 +37,7 @@ pub fn estimate(points: &[Vec3], k: usize, orientation: Orientation, up: Vec3) -
         return (Vec::new(), 0.0);
     }
     let k = k.clamp(3, 64).min(n);
+    let started = std::time::Instant::now();
     let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
     let tree = kiddo::ImmutableKdTree::<f32, 3>::new_from_slice(&coords);
     let qty = NonZero::new(k).unwrap();
@@ -50,7 +49,8 @@ pub fn estimate(points: &[Vec3], k: usize, orientation: Orientation, up: Vec3) -
             let near = tree.nearest_n::<kiddo::SquaredEuclidean>(&p.to_array(), qty);
             let ids: Vec<u32> = near.iter().map(|m| m.item as u32).filter(|&j| j as usize != i).collect();
             let spacing = near.iter().filter(|m| m.item as usize != i).map(|m| m.distance.sqrt()).fold(f32::INFINITY, f32::min);
-            (ids.clone(), plane_normal(points, i, &ids).unwrap_or(up), spacing)
+            let normal = plane_normal(points, i, &ids).unwrap_or(up);
+            (ids, normal, spacing)
         })
         .collect();
     let mut spacings: Vec<f32> = fitted.iter().map(|f| f.2).filter(|s| s.is_finite()).collect();
@@ -77,9 +77,11 @@ pub fn estimate(points: &[Vec3], k: usize, orientation: Orientation, up: Vec3) -
         }
         Orientation::Graph => {
             let neighbours: Vec<Vec<u32>> = fitted.into_iter().map(|f| f.0).collect();
+            log::debug!("normals: {n} planes fitted in {:.2} s", started.elapsed().as_secs_f64());
             propagate(points, &neighbours, &mut normals, up);
         }
     }
+    log::debug!("normals: {n} estimated and oriented in {:.2} s", started.elapsed().as_secs_f64());
     (normals, spacing)
 }
 
@@ -162,66 +164,86 @@ fn least_eigenvector(mut a: DMat3) -> Option<Vec3> {
     v.col(order[0]).as_vec3().try_normalize()
 }
 
-#[derive(PartialEq)]
-struct Edge(f32, u32, u32);
-impl Eq for Edge {}
-impl PartialOrd for Edge {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for Edge {
-    // Min-heap on the cost.
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.0.total_cmp(&self.0).then(o.2.cmp(&self.2))
-    }
-}
+/// Neighbours per point that make the orientation graph (of the k fitted):
+/// enough to keep thin parts connected, few enough to sort quickly.
+const GRAPH_NEIGHBOURS: usize = 10;
 
-/// Prim's algorithm over the (symmetrised) neighbour graph, flipping each
-/// newly reached normal to agree with the one it was reached from.
+/// Kruskal's algorithm over the neighbour graph (edges sorted by cost in
+/// parallel, a union-find keeps the tree's), then each tree walked from its
+/// seed, flipping each normal to agree with its parent's.
 fn propagate(points: &[Vec3], neighbours: &[Vec<u32>], normals: &mut [Vec3], up: Vec3) {
     let n = points.len();
-    // Symmetrise: a point is reachable from its neighbours' lists too.
-    let mut reverse: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for (i, ns) in neighbours.iter().enumerate() {
-        for &j in ns {
-            reverse[j as usize].push(i as u32);
+    // (cost bits, from, to): a non-negative f32's bits sort as the f32 does.
+    let fixed: &[Vec3] = normals;
+    let mut edges: Vec<(u32, u32, u32)> = neighbours
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(i, ns)| {
+            let ni = fixed[i];
+            // Each edge once: i -> j, unless j also lists i and j < i.
+            ns.iter().take(GRAPH_NEIGHBOURS).filter(move |&&j| (j as usize) > i || !neighbours[j as usize][..neighbours[j as usize].len().min(GRAPH_NEIGHBOURS)].contains(&(i as u32))).map(move |&j| {
+                let cost = (1.0 - ni.dot(fixed[j as usize]).abs()).max(0.0);
+                (cost.to_bits(), i as u32, j)
+            })
+        })
+        .collect();
+    edges.par_sort_unstable();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            let up = parent[parent[x as usize] as usize];
+            parent[x as usize] = up;
+            x = up;
+        }
+        x
+    }
+    // The tree as adjacency lists (compressed: offsets into one array).
+    let mut tree: Vec<(u32, u32)> = Vec::with_capacity(2 * n);
+    for &(_, a, b) in &edges {
+        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+        if ra != rb {
+            parent[ra as usize] = rb;
+            tree.push((a, b));
+            tree.push((b, a));
         }
     }
-    let mut by_height: Vec<u32> = (0..n as u32).collect();
-    by_height.sort_by(|&a, &b| points[b as usize].dot(up).total_cmp(&points[a as usize].dot(up)));
+    drop(edges);
+    tree.par_sort_unstable();
+    let mut offsets = vec![0u32; n + 1];
+    for &(a, _) in &tree {
+        offsets[a as usize + 1] += 1;
+    }
+    for i in 0..n {
+        offsets[i + 1] += offsets[i];
+    }
+
     let centroid = (points.iter().fold(DVec3::ZERO, |s, p| s + p.as_dvec3()) / n as f64).as_vec3();
+    let mut by_height: Vec<u32> = (0..n as u32).collect();
+    by_height.par_sort_unstable_by(|&a, &b| points[b as usize].dot(up).total_cmp(&points[a as usize].dot(up)));
     let mut reached = vec![false; n];
-    let mut heap = BinaryHeap::new();
+    let mut stack = Vec::new();
     for &seed in &by_height {
-        if reached[seed as usize] {
+        let s = seed as usize;
+        if reached[s] {
             continue;
         }
-        let s = seed as usize;
         let away = points[s] - centroid;
         let outward = if normals[s].dot(away).abs() > 1e-3 * away.length() { away } else { up };
         if normals[s].dot(outward) < 0.0 {
             normals[s] = -normals[s];
         }
-        reached[seed as usize] = true;
-        let push = |heap: &mut BinaryHeap<Edge>, i: u32, normals: &[Vec3], reached: &[bool]| {
-            for &j in neighbours[i as usize].iter().chain(&reverse[i as usize]) {
-                if !reached[j as usize] {
-                    let cost = 1.0 - normals[i as usize].dot(normals[j as usize]).abs();
-                    heap.push(Edge(cost, i, j));
+        reached[s] = true;
+        stack.push(seed);
+        while let Some(a) = stack.pop() {
+            for &(_, b) in &tree[offsets[a as usize] as usize..offsets[a as usize + 1] as usize] {
+                if !reached[b as usize] {
+                    reached[b as usize] = true;
+                    if normals[b as usize].dot(normals[a as usize]) < 0.0 {
+                        normals[b as usize] = -normals[b as usize];
+                    }
+                    stack.push(b);
                 }
             }
-        };
-        push(&mut heap, seed, normals, &reached);
-        while let Some(Edge(_, from, to)) = heap.pop() {
-            if reached[to as usize] {
-                continue;
-            }
-            reached[to as usize] = true;
-            if normals[to as usize].dot(normals[from as usize]) < 0.0 {
-                normals[to as usize] = -normals[to as usize];
-            }
-            push(&mut heap, to, normals, &reached);
         }
     }
 }
