@@ -51,6 +51,19 @@ fn main() {
     for arg in [format!("-L{out_dir}"), "-lshapeshifter_cpp".into(), "-lopenvdb".into(), "-ltbb".into(), "-lImath-3_1".into(), "-lblosc".into(), "-lstdc++".into()] {
         println!("cargo:rustc-link-arg-bin=shapeshifter-vdb-probe={arg}");
     }
+    // Assimp (FBX, COLLADA, ...) only in its converter program, a static
+    // library of its own that nothing else links (no cargo metadata).
+    cc::Build::new()
+        .cpp(true)
+        .file("cpp/assimp_convert.cpp")
+        .std("c++17")
+        .opt_level(2)
+        .define("NDEBUG", None)
+        .cargo_metadata(false)
+        .compile("shapeshifter_assimp");
+    for arg in [format!("-L{out_dir}"), "-lshapeshifter_assimp".into(), "-lassimp".into(), "-lstdc++".into()] {
+        println!("cargo:rustc-link-arg-bin=shapeshifter-assimp={arg}");
+    }
     println!("cargo:rerun-if-changed=src/io/ffi.rs");
     println!("cargo:rerun-if-changed=cpp");
     for f in CPP_FILES {

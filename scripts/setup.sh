@@ -11,7 +11,7 @@ cd "$(dirname "$0")/.."
 
 PACKAGES=(libopenvdb-dev libopenvdb-tools python3-openvdb libopenmesh-dev libcgal-dev
   libeigen3-dev libgmp-dev libmpfr-dev libtbb-dev libblosc-dev ccache pkg-config
-  python3-venv fonts-dejavu-core assimp-testmodels)
+  python3-venv fonts-dejavu-core libassimp-dev assimp-testmodels)
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,4 +1,5 @@
-//! An exemplar as a user brings it: a mesh (OBJ, PLY, OFF, STL, glTF/GLB) or
+//! An exemplar as a user brings it: a mesh (OBJ, PLY, OFF, STL, glTF/GLB,
+//! FBX, COLLADA) or
 //! a point cloud (PLY points, LAS/LAZ, E57), by what the file holds.
 
 use std::path::Path;
@@ -9,7 +10,7 @@ use crate::io::mesh::{self, Mesh};
 use crate::level::Up;
 
 /// Every extension an exemplar may have.
-pub const EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb", "gltf", "las", "laz", "e57"];
+pub const EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb", "gltf", "fbx", "dae", "las", "laz", "e57"];
 
 #[derive(Clone, Debug)]
 pub enum Exemplar {

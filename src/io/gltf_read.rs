@@ -39,6 +39,11 @@ const MAX_TRIANGLES: usize = 50_000_000;
 const MAX_IMAGE_SIDE: u32 = 16384;
 const MAX_IMAGE_BYTES: u64 = 1 << 30;
 
+/// [`read`], with a panic of the readers below (none known) as an error.
+pub fn read_bytes(bytes: &[u8], dir: &Path, name: &str) -> Result<Mesh, String> {
+    std::panic::catch_unwind(|| read(bytes, dir, name)).map_err(|_| "the glTF reader failed on this file (damaged)".to_string())?
+}
+
 pub fn read(bytes: &[u8], dir: &Path, name: &str) -> Result<Mesh, String> {
     let invalid = |e: ::gltf::Error| format!("not a valid glTF 2.0 file: {e}");
     // Extensions first: compressed primitives have no buffer views to validate.
@@ -366,17 +371,27 @@ fn check_accessors(doc: &::gltf::Document, buffers: &[Vec<u8>]) -> Result<(), St
 }
 
 fn load_image(img: &::gltf::Image, buffers: &[Vec<u8>], dir: &Path) -> Result<image::RgbImage, String> {
-    let bytes = match img.source() {
-        ::gltf::image::Source::View { view, .. } => {
+    // The format from the bytes, else from the MIME type or the file name
+    // (a TGA has no signature to guess it by).
+    let (bytes, named) = match img.source() {
+        ::gltf::image::Source::View { view, mime_type } => {
             let b = &buffers[view.buffer().index()];
-            b[view.offset()..view.offset() + view.length()].to_vec()
+            (b[view.offset()..view.offset() + view.length()].to_vec(), image::ImageFormat::from_mime_type(mime_type))
         }
-        ::gltf::image::Source::Uri { uri, .. } => match data_uri(uri) {
-            Some(d) => d?,
-            None => read_external(uri, dir, MAX_IMAGE_BYTES)?,
-        },
+        ::gltf::image::Source::Uri { uri, mime_type } => {
+            let named = mime_type.and_then(image::ImageFormat::from_mime_type).or_else(|| image::ImageFormat::from_path(uri).ok());
+            match data_uri(uri) {
+                Some(d) => (d?, named),
+                None => (read_external(uri, dir, MAX_IMAGE_BYTES)?, named),
+            }
+        }
     };
     let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
+    if reader.format().is_none() {
+        if let Some(f) = named {
+            reader.set_format(f);
+        }
+    }
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_IMAGE_SIDE);
     limits.max_image_height = Some(MAX_IMAGE_SIDE);

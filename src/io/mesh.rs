@@ -79,7 +79,7 @@ impl Texture {
 }
 
 /// Mesh formats we read, by extension.
-pub const MESH_EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb", "gltf"];
+pub const MESH_EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb", "gltf", "fbx", "dae"];
 
 /// Mesh formats [`save`] writes, by extension: the ones we read, and glTF binary.
 pub const WRITE_EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb"];
@@ -254,7 +254,7 @@ pub fn load(path: &Path) -> Result<Mesh> {
     if !MESH_EXTENSIONS.contains(&ext.as_str()) {
         return Err(Error::file(
             path,
-            format!("unsupported mesh format '.{ext}' (expected .obj, .ply, .off, .stl, .glb or .gltf; point clouds: .las, .laz, .e57)"),
+            format!("unsupported mesh format '.{ext}' (expected .obj, .ply, .off, .stl, .glb, .gltf, .fbx or .dae; point clouds: .las, .laz, .e57)"),
         ));
     }
     if ext == "glb" || ext == "gltf" {
@@ -262,10 +262,11 @@ pub fn load(path: &Path) -> Result<Mesh> {
         let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let mesh = std::panic::catch_unwind(|| crate::io::gltf_read::read(&bytes, dir, &name))
-            .map_err(|_| Error::file(path, "the glTF reader failed on this file (damaged)"))?
-            .map_err(|e| Error::file(path, e))?;
+        let mesh = crate::io::gltf_read::read_bytes(&bytes, dir, &name).map_err(|e| Error::file(path, e))?;
         return check_mesh(path, mesh);
+    }
+    if crate::io::assimp::EXTENSIONS.contains(&ext.as_str()) {
+        return check_mesh(path, crate::io::assimp::load(path)?);
     }
     if ext == "obj" {
         // OBJ is read in Rust (src/io/obj.rs says why: OpenMesh's reader aborts

@@ -3,11 +3,13 @@
 //! OBJ and glTF in Rust; point clouds: PLY, LAS/LAZ, E57) and
 //! out (PLY, glTF binary), level files (OpenVDB), and `info` on any of them.
 
+pub mod assimp;
 pub mod cloud;
 pub mod exemplar;
 pub(crate) mod ffi;
 pub mod glb;
-mod gltf_read;
+pub mod helper;
+pub(crate) mod gltf_read;
 pub mod info;
 pub mod mesh;
 pub mod poisson;
