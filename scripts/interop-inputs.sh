@@ -35,6 +35,8 @@ blender -b --factory-startup --python-expr "
 import bpy, sys
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_mesh.ply(filepath='$WORK/inputs/mesh/demo_tower.ply')
+# The PLY is y-up and Blender z-up: turned upright, so that the glTF (y-up) stands.
+bpy.context.selected_objects[0].rotation_euler[0] = 1.5707963267948966
 bpy.ops.export_scene.gltf(filepath='$WORK/inputs/blender.glb', export_format='GLB')
 " > "$WORK/inputs/blender.log" 2>&1 || { tail -20 "$WORK/inputs/blender.log" >&2; echo "interop-inputs: Blender's glTF export failed" >&2; exit 1; }
 "$VENV/bin/python" "$ROOT/scripts/interop_inputs.py" "$BIN" "$WORK/inputs" "$WORK/inputs/points.ply" "$VOXELS" "$WORK/inputs/blender.glb"

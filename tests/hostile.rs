@@ -5,6 +5,7 @@
 
 #[path = "common/hostile.rs"]
 mod hostile;
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -18,8 +19,18 @@ fn bin() -> PathBuf {
 #[test]
 fn mutated_inputs_end_cleanly_within_bounds() {
     let work = tempfile::tempdir().unwrap();
-    let seeds = hostile::builtin_seeds(work.path());
+    let mut seeds = hostile::builtin_seeds(work.path());
     assert!(seeds.len() >= 7, "every mesh format and a level file");
+    // FBX and COLLADA (read through the Assimp converter): files nobody here
+    // wrote, from Debian's assimp-testmodels.
+    for rel in ["FBX/box.fbx", "Collada/cube_triangulate.dae"] {
+        let p = Path::new("/usr/share/assimp/models").join(rel);
+        if p.is_file() {
+            seeds.push(hostile::file_seed(&p).unwrap());
+        } else {
+            common::skip(&format!("{} is absent (assimp-testmodels): no FBX/COLLADA mutations", p.display()));
+        }
+    }
     let c = hostile::Campaign {
         bin: bin(),
         seed: 17,

@@ -334,3 +334,55 @@ fn a_georeferenced_tile_at_metric_voxels_lands_where_it_was() {
     assert_clean_failure(&o, "tile", "use --voxel-size 0.19");
     assert!(!dir.path().join("x").join("manifest.json").exists());
 }
+
+fn assimp_model(rel: &str) -> Option<PathBuf> {
+    let p = Path::new("/usr/share/assimp/models").join(rel);
+    if !p.exists() {
+        skip(&format!("{} is absent (Debian package assimp-testmodels; scripts/setup.sh installs it)", p.display()));
+        return None;
+    }
+    Some(p)
+}
+
+/// FBX and COLLADA through the Assimp converter: a closed box, cubes with
+/// their material colours, the COLLADA duck with its TGA texture; each
+/// encodes. Damaged files and a missing converter are one error line.
+#[test]
+fn fbx_and_collada_read_through_assimp() {
+    let (Some(fbx), Some(cubes), Some(duck)) = (assimp_model("FBX/box.fbx"), assimp_model("FBX/cubes_with_names.fbx"), assimp_model("Collada/duck.dae")) else { return };
+    let b = mesh::load(&fbx).unwrap();
+    assert_eq!((b.positions.len(), b.triangles.len()), (8, 12));
+    assert!(b.is_closed(), "welded: a closed box");
+    let c = mesh::load(&cubes).unwrap();
+    let colours: std::collections::HashSet<[u8; 3]> = match &c.colours {
+        mesh::MeshColours::PerCorner(v) => v.iter().map(|c| (*c * 255.0).round().as_uvec3().to_array().map(|x| x as u8)).collect(),
+        other => panic!("no material colours: {other:?}"),
+    };
+    assert!(colours.len() >= 2, "the cubes' materials differ: {colours:?}");
+    let d = mesh::load(&duck).unwrap();
+    let t = d.texture.as_ref().expect("the duck's TGA texture");
+    assert_eq!((t.image.width(), t.image.height()), (512, 512));
+    // Mostly yellow where the texture is sampled at the triangles' centres.
+    let yellow = (0..d.triangles.len()).filter(|&i| {
+        let c = d.colour_at(i, Vec3::splat(1.0 / 3.0)).unwrap();
+        c.x > 0.6 && c.y > 0.5 && c.z < 0.3
+    });
+    assert!(yellow.count() * 2 > d.triangles.len());
+    let (levels, _) = encode_exemplar(&Exemplar::Mesh(d), &small()).unwrap();
+    assert!(levels.last().unwrap().len() > 500);
+
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(&fbx).unwrap();
+    let cut = dir.path().join("cut.fbx");
+    std::fs::write(&cut, &bytes[..bytes.len() / 3]).unwrap();
+    assert_clean_failure(&shapeshifter(&["info", cut.to_str().unwrap()]), "cut.fbx", "assimp");
+    let bad = dir.path().join("bad.dae");
+    std::fs::write(&bad, "<?xml version=\"1.0\"?><COLLADA><library_geometries><geometry><mesh><source id=\"p\"><float_array count=\"999999999\">1 2").unwrap();
+    assert_clean_failure(&shapeshifter(&["info", bad.to_str().unwrap()]), "bad.dae", "assimp");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_shapeshifter"))
+        .args(["info", fbx.to_str().unwrap()])
+        .env(shapeshifter::io::assimp::ASSIMP_ENV, "/nonexistent/shapeshifter-assimp")
+        .output()
+        .unwrap();
+    assert_clean_failure(&o, "box.fbx", "cannot start the assimp converter");
+}

@@ -44,36 +44,5 @@ pub fn load(path: &Path) -> Result<Mesh> {
     let converted = std::fs::read(&glb).map_err(|e| Error::file(path, format!("the converter wrote nothing readable ({e})")))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let mesh = crate::io::gltf_read::read_bytes(&converted, dir, &name).map_err(|e| Error::file(path, format!("as converted by Assimp: {e}")))?;
-    Ok(weld(mesh))
-}
-
-/// Vertices at exactly the same position made one: the glTF Assimp writes
-/// gives each triangle corner its own vertex, which would make every edge a
-/// boundary (an open surface) for meshing. Colours and UVs are per corner,
-/// so nothing else changes.
-fn weld(mut mesh: Mesh) -> Mesh {
-    let mut index: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
-    let mut positions = Vec::new();
-    let remap: Vec<u32> = mesh
-        .positions
-        .iter()
-        .map(|p| {
-            let key = p.to_array().map(|v| if v == 0.0 { 0 } else { v.to_bits() });
-            *index.entry(key).or_insert_with(|| {
-                positions.push(*p);
-                positions.len() as u32 - 1
-            })
-        })
-        .collect();
-    if let crate::io::mesh::MeshColours::PerVertex(c) = &mesh.colours {
-        // Per-vertex colours (not what the glTF reader gives) as corners.
-        let corners = mesh.triangles.iter().flat_map(|t| t.map(|i| c[i as usize])).collect();
-        mesh.colours = crate::io::mesh::MeshColours::PerCorner(corners);
-    }
-    for t in &mut mesh.triangles {
-        *t = t.map(|i| remap[i as usize]);
-    }
-    mesh.positions = positions;
-    mesh
+    crate::io::gltf_read::read_bytes(&converted, dir, &name).map_err(|e| Error::file(path, format!("as converted by Assimp: {e}")))
 }

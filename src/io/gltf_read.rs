@@ -162,7 +162,7 @@ pub fn read(bytes: &[u8], dir: &Path, name: &str) -> Result<Mesh, String> {
     if out.triangles.is_empty() {
         return Err("has no triangles in its scene".into());
     }
-    Ok(out.finish(name))
+    Ok(weld(out.finish(name)))
 }
 
 #[derive(Default)]
@@ -398,4 +398,35 @@ fn load_image(img: &::gltf::Image, buffers: &[Vec<u8>], dir: &Path) -> Result<im
     limits.max_alloc = Some(MAX_IMAGE_BYTES);
     reader.limits(limits);
     Ok(reader.decode().map_err(|e| e.to_string())?.to_rgb8())
+}
+
+/// Vertices at exactly the same position made one: glTF writers split
+/// vertices wherever a normal or UV changes (Blender's exporter and Assimp's
+/// give flat-shaded faces their own corners), which would make those edges
+/// boundaries (an open surface, meshed as one). Colours and UVs are per
+/// corner here, so nothing else changes.
+fn weld(mut mesh: Mesh) -> Mesh {
+    let mut index: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
+    let mut positions = Vec::new();
+    let remap: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let key = p.to_array().map(|v| if v == 0.0 { 0 } else { v.to_bits() });
+            *index.entry(key).or_insert_with(|| {
+                positions.push(*p);
+                positions.len() as u32 - 1
+            })
+        })
+        .collect();
+    if let crate::io::mesh::MeshColours::PerVertex(c) = &mesh.colours {
+        // Per-vertex colours (not what the glTF reader gives) as corners.
+        let corners = mesh.triangles.iter().flat_map(|t| t.map(|i| c[i as usize])).collect();
+        mesh.colours = crate::io::mesh::MeshColours::PerCorner(corners);
+    }
+    for t in &mut mesh.triangles {
+        *t = t.map(|i| remap[i as usize]);
+    }
+    mesh.positions = positions;
+    mesh
 }
