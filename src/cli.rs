@@ -910,6 +910,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     seed: Some(seed),
                     config_digest: config.digest(),
                     exemplar_open: manifest.open_surface,
+                    crs: manifest.crs.clone(),
                 };
                 dataset::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview, config.output.write_options())?;
             }

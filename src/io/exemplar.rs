@@ -54,6 +54,14 @@ impl Exemplar {
         }
     }
 
+    /// The coordinate reference system its file names (point clouds).
+    pub fn crs(&self) -> Option<String> {
+        match self {
+            Exemplar::Mesh(_) => None,
+            Exemplar::Cloud(c) => c.crs.clone(),
+        }
+    }
+
     /// (triangles, points) for the manifest.
     pub fn counts(&self) -> (usize, usize) {
         match self {

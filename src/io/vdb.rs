@@ -32,6 +32,9 @@ pub struct Provenance {
     pub config_digest: String,
     /// The exemplar was an open surface (boundary edges): meshing picks APSS.
     pub exemplar_open: bool,
+    /// The exemplar's coordinate reference system, where its file named one
+    /// (a LAS tile's "EPSG:32633").
+    pub crs: Option<String>,
 }
 
 /// Where the PointDataGrid `points` of a level goes.
@@ -107,6 +110,9 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
         meta_str("shapeshifter_config_digest", &provenance.config_digest),
         meta_num("shapeshifter_exemplar_open", MetaKind::Int, provenance.exemplar_open as i32 as f64),
     ];
+    if let Some(crs) = &provenance.crs {
+        meta.push(meta_str("shapeshifter_crs", crs));
+    }
     if let Some(seed) = provenance.seed {
         // Kept as a string: OpenVDB has no unsigned 64-bit metadata.
         meta.push(meta_str("shapeshifter_seed", &seed.to_string()));
@@ -240,6 +246,7 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
         seed: find(&data.meta, "shapeshifter_seed").and_then(|m| m.text.parse().ok()),
         config_digest: find(&data.meta, "shapeshifter_config_digest").map(|m| m.text.clone()).unwrap_or_default(),
         exemplar_open: find(&data.meta, "shapeshifter_exemplar_open").is_some_and(|m| m.number != 0.0),
+        crs: find(&data.meta, "shapeshifter_crs").map(|m| m.text.clone()),
     };
     Ok((level, provenance))
 }

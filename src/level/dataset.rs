@@ -39,6 +39,9 @@ pub struct Manifest {
     /// Points of a point-cloud exemplar (vertices of a mesh).
     #[serde(default)]
     pub points: usize,
+    /// The exemplar's coordinate reference system, where its file named one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crs: Option<String>,
     /// The exemplar has boundary edges (meshing then prefers APSS).
     pub open_surface: bool,
     /// Normalisation: world = centre + normalised / scale.
@@ -92,7 +95,7 @@ pub fn write(
 ) -> Result<Manifest> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
     let open_surface = exemplar.is_open();
-    let provenance = Provenance { exemplar: exemplar.name().to_string(), exemplar_open: open_surface, ..Default::default() };
+    let provenance = Provenance { exemplar: exemplar.name().to_string(), exemplar_open: open_surface, crs: exemplar.crs(), ..Default::default() };
     let mut entries = Vec::new();
     for level in levels {
         let file = level_file_name(level.index);
@@ -123,6 +126,7 @@ pub fn write(
         source_sha256: source_sha256.into(),
         triangles: exemplar.counts().0,
         points: exemplar.counts().1,
+        crs: exemplar.crs(),
         open_surface,
         centre: frame.centre.to_array(),
         scale: frame.scale,

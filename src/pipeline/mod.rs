@@ -531,6 +531,7 @@ pub fn sample_stage(
     exemplar_levels: &[Level],
     exemplar_name: &str,
     exemplar_open: bool,
+    exemplar_crs: Option<&str>,
     config: &Config,
     device: tch::Device,
     models_dir: &Path,
@@ -567,6 +568,7 @@ pub fn sample_stage(
         seed: Some(options.seed),
         config_digest: config.digest(),
         exemplar_open,
+        crs: exemplar_crs.map(str::to_string),
     };
     for &i in &todo {
         crate::util::interrupt::check()?;
@@ -842,6 +844,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
         seed: Some(options.seed),
         config_digest: config.map(|c| c.digest()).unwrap_or_default(),
         exemplar_open: manifest.open_surface,
+        crs: manifest.crs.clone(),
     };
     if !rungs.iter().any(|(r, _)| *r == Rung::Untrained) {
         let _ = std::fs::remove_dir_all(out.join(Rung::Untrained.name()));
@@ -960,7 +963,7 @@ pub fn run_train(paths: &RunPaths, config: &Config, device: tch::Device, only: O
 /// Stage 3: samples variants `options.first ..` into `OUT/variants`.
 pub fn run_sample(paths: &RunPaths, config: &Config, device: tch::Device, options: &SampleOptions) -> Result<Vec<PathBuf>> {
     let (manifest, levels) = dataset::read(&paths.exemplar())?;
-    sample_stage(&levels, &manifest.exemplar, manifest.open_surface, config, device, &paths.models(), &paths.variants(), options, true)
+    sample_stage(&levels, &manifest.exemplar, manifest.open_surface, manifest.crs.as_deref(), config, device, &paths.models(), &paths.variants(), options, true)
 }
 
 /// Stage 4: meshes the variants with indices in `range` that exist, as
