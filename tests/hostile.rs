@@ -82,7 +82,7 @@ fn regression_inputs_fail_cleanly() {
         if is_vdb {
             commands.push(vec!["points".into(), f.display().to_string(), "-o".into(), out.join("p.ply").display().to_string()]);
         } else {
-            commands.push(vec!["encode".into(), f.display().to_string(), "-o".into(), out.join("enc").display().to_string()]);
+            commands.push(vec!["encode".into(), f.display().to_string(), "-o".into(), out.join("enc").display().to_string(), "--finest".into(), "32".into(), "--sampling-resolution".into(), "64".into()]);
         }
         for argv in commands {
             std::fs::create_dir_all(&out).unwrap();
