@@ -316,7 +316,8 @@ fn a_georeferenced_tile_at_metric_voxels_lands_where_it_was() {
     }
     let n = p.len();
     let laz = dir.path().join("tile.laz");
-    shapeshifter::testing::clouds::write_las(&laz, &p, None, &vec![100; n], &vec![2; n], None).unwrap();
+    let wkt = r#"PROJCS["WGS 84 / UTM zone 33N",GEOGCS["WGS 84"],AUTHORITY["EPSG","32633"]]"#;
+    shapeshifter::testing::clouds::write_las(&laz, &p, None, &vec![100; n], &vec![2; n], Some(wkt)).unwrap();
     let out = dir.path().join("enc");
     let o = shapeshifter(&["encode", laz.to_str().unwrap(), "-o", out.to_str().unwrap(), "--voxel-size", "0.2", "--finest", "256", "--sampling-resolution", "512"]);
     assert!(o.status.success(), "{}", common::stderr(&o));
@@ -330,6 +331,7 @@ fn a_georeferenced_tile_at_metric_voxels_lands_where_it_was() {
     }
     let info = stdout(&shapeshifter(&["info", out.join("level_4.vdb").to_str().unwrap()]));
     assert!(info.contains("vec3d") && info.contains("voxel size 0.200000"), "{info}");
+    assert!(info.contains("shapeshifter_crs = WGS 84 / UTM zone 33N (EPSG:32633)") && info.contains("shapeshifter_up = z"), "{info}");
     let o = shapeshifter(&["encode", laz.to_str().unwrap(), "-o", dir.path().join("x").to_str().unwrap(), "--voxel-size", "0.1", "--finest", "256", "--sampling-resolution", "512"]);
     assert_clean_failure(&o, "tile", "use --voxel-size 0.19");
     assert!(!dir.path().join("x").join("manifest.json").exists());
