@@ -88,8 +88,9 @@ p = os.path.join(WORK, "o3d_ascii.ply")
 o3d.io.write_point_cloud(p, plain, write_ascii=True)
 check_cloud(p, f"Open3D {o3d.__version__} (ASCII PLY, no normals)", n, lo, hi, ["rgb"])
 
-# laspy: metres around a UTM origin (ten times the exemplar's size).
-M = P * 10 + OFFSET
+# laspy: metres around a UTM origin (ten times the exemplar's size), turned
+# from the exemplar's y up to z up, as LAS and E57 have it.
+M = np.stack([P[:, 0], -P[:, 2], P[:, 1]], 1) * 10 + OFFSET
 header = laspy.LasHeader(point_format=7, version="1.4")
 header.offsets, header.scales = OFFSET, [0.001] * 3
 header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(WKT))

@@ -7,6 +7,9 @@ at the given density (points per square metre) like an airborne scanner
     python lidar_tile.py OUT.laz --size 500 --density 4
     python lidar_tile.py OUT.laz --size 500 --density 60 --crop 200 220 50
 
+--ply OUT.ply also writes every third point (positions about the tile's centre,
+colours) as a PLY of points, for scripts/blender_points.py.
+
 --crop X Y SIZE samples only the square [X, X+SIZE] x [Y, Y+SIZE] of the same
 tile (the same buildings and trees), at the given density.
 
@@ -36,6 +39,7 @@ def main():
     ap.add_argument("--density", type=float, default=4.0, help="points per square metre")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--crop", type=float, nargs=3, metavar=("X", "Y", "SIZE"))
+    ap.add_argument("--ply", help="also write every third point as a PLY of points")
     a = ap.parse_args()
     L = a.size
     cx0, cy0, cs = a.crop if a.crop else (0.0, 0.0, L)
@@ -105,6 +109,16 @@ def main():
     las.return_number = np.ones(len(X), np.uint8)
     las.number_of_returns = np.ones(len(X), np.uint8)
     las.write(a.out)
+    if a.ply:
+        keep3 = np.arange(0, len(X), 3)
+        P = np.stack([X, Y, Zs], 1)[keep3]
+        P -= P.mean(0)
+        rec = np.zeros(len(keep3), dtype=[("p", "<f4", 3), ("c", "u1", 3)])
+        rec["p"], rec["c"] = P, RGB[keep3].astype(np.uint8)
+        head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(keep3)}\nproperty float x\nproperty float y\nproperty float z\n"
+                "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
+        with open(a.ply, "wb") as f:
+            f.write(head.encode() + rec.tobytes())
     print(f"{a.out}: {len(X)} points, {cs:g} x {cs:g} m" + (f" of a {L:g} m tile" if a.crop else "") + f", {nb} buildings and {nt} trees in the tile")
 
 
