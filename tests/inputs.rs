@@ -18,12 +18,7 @@ use common::{assert_clean_failure, shapeshifter, skip, stdout};
 
 /// Debian's assimp-testmodels glTF 2.0 folder (`make test`'s setup installs it).
 fn assimp_gltf(rel: &str) -> Option<PathBuf> {
-    let p = Path::new("/usr/share/assimp/models/glTF2").join(rel);
-    if !p.exists() {
-        skip(&format!("{} is absent (Debian package assimp-testmodels; scripts/setup.sh installs it)", p.display()));
-        return None;
-    }
-    Some(p)
+    assimp_model(&format!("glTF2/{rel}"))
 }
 
 /// The JSON of a .gltf, or of a .glb's first chunk.
@@ -204,15 +199,7 @@ fn our_glb_reads_back_with_its_colours() {
 }
 
 fn sphere_points(n: usize, radius: f64, centre: DVec3) -> (Vec<DVec3>, Vec<Vec3>) {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    let p: Vec<DVec3> = (0..n)
-        .map(|i| {
-            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let r = (1.0 - z * z).sqrt();
-            let th = golden * i as f64;
-            centre + radius * DVec3::new(r * th.cos(), r * th.sin(), z)
-        })
-        .collect();
+    let p = shapeshifter::testing::shapes::sphere_points(n, radius, centre);
     let c = p.iter().map(|q| Vec3::new(((q.z - centre.z) / (2.0 * radius) + 0.5) as f32, 0.3, 0.7)).collect();
     (p, c)
 }

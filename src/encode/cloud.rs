@@ -13,7 +13,7 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::{exemplar_frame, group_starts, morton, pool_all, EncodeError, EncodeOptions, EncodeStats, MeanPoint, Pooling, Quadric, Sample};
+use super::{exemplar_frame, group_starts, morton, EncodeError, EncodeOptions, EncodeStats, Sample};
 use crate::io::cloud::PointCloud;
 use crate::level::{Level, Up};
 
@@ -111,21 +111,7 @@ pub fn encode_cloud(cloud: &PointCloud, options: &EncodeOptions, format_up: Up) 
         .collect();
     drop(pairs);
     stats.sample_s = t.elapsed().as_secs_f64();
-    stats.sampling_voxels = samples.len();
-    let mut counts = vec![(rs, samples.len())];
-
-    let (mut levels, pool_s, output_s) = match options.pooling {
-        Pooling::Qem => pool_all::<Quadric>(&samples, options, frame, &mut counts),
-        Pooling::Average => pool_all::<MeanPoint>(&samples, options, frame, &mut counts),
-    };
-    stats.pool_s = pool_s;
-    stats.output_s = output_s;
-    levels.reverse();
-    for (i, level) in levels.iter_mut().enumerate() {
-        level.index = i;
-    }
-    counts.reverse();
-    stats.voxels_per_resolution = counts;
+    let levels = super::pool_levels(&samples, options, frame, &mut stats);
     stats.total_s = start.elapsed().as_secs_f64();
     Ok((levels, stats))
 }
@@ -136,17 +122,9 @@ mod tests {
     use crate::io::cloud::{Attributes, PointCloud};
 
     fn sphere_cloud(n: usize, radius: f64, centre: DVec3) -> PointCloud {
-        // A Fibonacci sphere: even spacing, no normals, colour by height.
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        let positions: Vec<DVec3> = (0..n)
-            .map(|i| {
-                let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let r = (1.0 - y * y).sqrt();
-                let th = golden * i as f64;
-                centre + radius * DVec3::new(r * th.cos(), y, r * th.sin())
-            })
-            .collect();
-        let colours = positions.iter().map(|p| Vec3::splat((((p.y - centre.y) / radius + 1.0) * 0.5) as f32)).collect();
+        // Even spacing, no normals, colour by height.
+        let positions = crate::testing::shapes::sphere_points(n, radius, centre);
+        let colours = positions.iter().map(|p| Vec3::splat((((p.z - centre.z) / radius + 1.0) * 0.5) as f32)).collect();
         PointCloud { name: "sphere".into(), positions, attributes: Attributes { colours: Some(colours), ..Default::default() }, crs: None, format: "test".into(), up: Up::Y }
     }
 
@@ -171,8 +149,8 @@ mod tests {
             assert!(((p - centre).length() - 10.0).abs() < 0.35, "point {i} at radius {}", (p - centre).length());
             assert!(finest.normals[i].dot(radial) > 0.9, "normal {i} {} not outward", finest.normals[i]);
         }
-        // The top is white, the bottom black.
-        let top = (0..finest.len()).max_by(|&a, &b| finest.point_normalised(a).y.total_cmp(&finest.point_normalised(b).y)).unwrap();
+        // The top (+z) is white, the bottom black.
+        let top = (0..finest.len()).max_by(|&a, &b| finest.point_normalised(a).z.total_cmp(&finest.point_normalised(b).z)).unwrap();
         assert!(finest.colours[top].x > 0.9);
     }
 

@@ -295,22 +295,7 @@ pub fn encode(mesh: &Mesh, options: &EncodeOptions) -> Result<(Vec<Level>, Encod
     let samples = sample_voxels(&prep, &pairs, &groups, rs, &colours);
     drop((pairs, groups));
     stats.sample_s = t.elapsed().as_secs_f64();
-    stats.sampling_voxels = samples.len();
-    let mut counts = vec![(rs, samples.len())];
-
-    // Pool level by level. Output levels are collected finest first.
-    let (mut levels, pool_s, output_s) = match options.pooling {
-        Pooling::Qem => pool_all::<Quadric>(&samples, options, frame, &mut counts),
-        Pooling::Average => pool_all::<MeanPoint>(&samples, options, frame, &mut counts),
-    };
-    stats.pool_s = pool_s;
-    stats.output_s = output_s;
-    levels.reverse();
-    for (i, level) in levels.iter_mut().enumerate() {
-        level.index = i;
-    }
-    counts.reverse();
-    stats.voxels_per_resolution = counts;
+    let levels = pool_levels(&samples, options, frame, &mut stats);
     stats.total_s = start.elapsed().as_secs_f64();
     log::debug!(
         "encoded '{}': {} pairs, {} sampling voxels, {:?} in {:.3} s",
@@ -321,6 +306,27 @@ pub fn encode(mesh: &Mesh, options: &EncodeOptions) -> Result<(Vec<Level>, Encod
         stats.total_s
     );
     Ok((levels, stats))
+}
+
+/// The output levels, coarsest first, pooled from the sampling grid's
+/// `samples` (sorted by key); fills the pooling figures of `stats`.
+fn pool_levels(samples: &[Sample], options: &EncodeOptions, frame: Frame, stats: &mut EncodeStats) -> Vec<Level> {
+    stats.sampling_voxels = samples.len();
+    let mut counts = vec![(options.sampling_resolution, samples.len())];
+    // Pool level by level. Output levels are collected finest first.
+    let (mut levels, pool_s, output_s) = match options.pooling {
+        Pooling::Qem => pool_all::<Quadric>(samples, options, frame, &mut counts),
+        Pooling::Average => pool_all::<MeanPoint>(samples, options, frame, &mut counts),
+    };
+    stats.pool_s = pool_s;
+    stats.output_s = output_s;
+    levels.reverse();
+    for (i, level) in levels.iter_mut().enumerate() {
+        level.index = i;
+    }
+    counts.reverse();
+    stats.voxels_per_resolution = counts;
+    levels
 }
 
 /// Encodes a mesh or a point cloud (see [`encode`] and [`cloud::encode_cloud`]).

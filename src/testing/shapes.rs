@@ -133,3 +133,16 @@ pub fn surface_points(
     }
     pts
 }
+
+/// `n` points spread evenly over a sphere (a Fibonacci lattice, poles on z).
+pub fn sphere_points(n: usize, radius: f64, centre: glam::DVec3) -> Vec<glam::DVec3> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let th = golden * i as f64;
+            centre + radius * glam::DVec3::new(r * th.cos(), r * th.sin(), z)
+        })
+        .collect()
+}
