@@ -635,6 +635,21 @@ mod tests {
         assert!(err.contains("paper"), "{err}");
     }
 
+    /// The exemplar-file keys are left out at their defaults (old run folders'
+    /// digests hold), and `--set` can still give them.
+    #[test]
+    fn exemplar_keys_are_optional_and_settable() {
+        let a = Config::load("cpu", &[]).unwrap();
+        assert!(!a.to_toml().contains("voxel_size") && !a.to_toml().contains("normal_orientation"));
+        let b = Config::load("cpu", &["encode.voxel_size=2".into(), "encode.up=z".into(), "encode.cloud_colour=intensity".into()]).unwrap();
+        assert_eq!(b.encode.voxel_size, Some(2.0));
+        assert_eq!(b.encode.up, Some(crate::level::Up::Z));
+        assert_eq!(b.encode.cloud_colour, crate::io::cloud::CloudColour::Intensity);
+        assert_ne!(a.stage_digest("encode"), b.stage_digest("encode"));
+        assert_eq!(b.with_overrides(&[]).unwrap().encode, b.encode, "recorded and read back");
+        assert!(Config::load("cpu", &["encode.voxel_sise=2".into()]).is_err(), "a misspelt key");
+    }
+
     #[test]
     fn stage_digests_ignore_later_stages() {
         let a = Config::load("cpu", &[]).unwrap();
