@@ -52,7 +52,7 @@ fn level_file_round_trip_keeps_voxels_features_and_frame() {
     let path = dir.path().join("level_1.vdb");
     let level = sample_level();
     assert!(level.len() > 1000);
-    let prov = Provenance { exemplar: "tower".into(), seed: Some(42), config_digest: "abc123".into(), exemplar_open: true };
+    let prov = Provenance { exemplar: "tower".into(), seed: Some(42), config_digest: "abc123".into(), exemplar_open: true, crs: Some("EPSG:32633".into()) };
     vdb::write_level(&path, &level, &prov, WriteOptions::default()).unwrap();
     let (back, prov_back) = vdb::read_level(&path).unwrap();
     assert_eq!(prov_back, prov);

@@ -15,7 +15,7 @@ fn encoded_demo(dir: &std::path::Path) -> (std::path::PathBuf, Config) {
     let config = Config::load("demo", &[]).unwrap();
     let mesh = exemplar::ruined_tower(&Default::default());
     let enc = dir.join("exemplar");
-    pipeline::encode_stage(&mesh, "demo", "0", &config, &enc).unwrap();
+    pipeline::encode_stage(&shapeshifter::io::exemplar::Exemplar::Mesh(mesh.clone()), "demo", "0", &config, &enc).unwrap();
     (enc, config)
 }
 
