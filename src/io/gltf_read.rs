@@ -122,8 +122,8 @@ pub fn read(bytes: &[u8], dir: &Path, name: &str) -> Result<Mesh, String> {
                                 }
                             }
                         });
-                        if slot.is_some() {
-                            image_slot = out.image_slot(index, slot.clone().unwrap());
+                        if let Some(image) = slot {
+                            image_slot = out.image_slot(index, image);
                             uvs = Some(t);
                         }
                     }
@@ -180,12 +180,13 @@ struct Builder {
 }
 
 impl Builder {
-    fn image_slot(&mut self, index: usize, image: (image::RgbImage, [Wrap; 2])) -> u32 {
+    /// The slot of glTF image `index`, copied in on first use only.
+    fn image_slot(&mut self, index: usize, image: &(image::RgbImage, [Wrap; 2])) -> u32 {
         if let Some(&s) = self.slots.get(&index) {
             return s;
         }
         let s = self.images.len() as u32;
-        self.images.push(image);
+        self.images.push(image.clone());
         self.slots.insert(index, s);
         s
     }

@@ -60,7 +60,8 @@ enum Prop {
     List(usize, usize),
 }
 
-fn check_ply(all: &[u8]) -> Result<Declared, String> {
+/// [`check`] of a PLY file's bytes, already read.
+pub(crate) fn check_ply(all: &[u8]) -> Result<Declared, String> {
     let head = &all[..all.len().min(MAX_HEADER)];
     // The end_header line itself: a damaged newline before it ("...indicesAend_header")
     // sent OpenMesh reading binary data as header lines for minutes.

@@ -188,10 +188,9 @@ pub fn load(path: &Path) -> Result<PointCloud> {
     let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let cloud = match ext.as_str() {
         "ply" => {
-            // Sizes checked against the length first, as for PLY meshes.
-            crate::io::mesh_check::check(path, "ply")?;
+            // Read once; sizes checked against the length first, as for PLY meshes.
             let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-            ply::read(&bytes, &name)
+            crate::io::mesh_check::check_ply(&bytes).and_then(|_| ply::read(&bytes, &name))
         }
         "las" | "laz" => las::read(path, &name),
         "e57" => e57::read(path, &name),
