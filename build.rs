@@ -22,6 +22,11 @@ fn main() {
         // Always optimise the C++: OpenVDB/CGAL code is many times slower at -O0,
         // and ccache keeps the cost to the first build.
         .opt_level(2)
+        // No C++ debug information: OpenVDB's and CGAL's templates made it
+        // 270 MB of every 280 MB test binary (7.7 GB of target/ for one
+        // `cargo test` build, and linkers killed by SIGBUS on a full disk).
+        // Rust frames keep their line tables (profile.release debug = 1).
+        .debug(false)
         .include("/usr/include/eigen3")
         // One NDEBUG for every translation unit: the C++ files instantiate
         // the same OpenMesh templates, and a macro that changes their bodies
@@ -58,6 +63,7 @@ fn main() {
         .file("cpp/assimp_convert.cpp")
         .std("c++17")
         .opt_level(2)
+        .debug(false)
         .define("NDEBUG", None)
         .cargo_metadata(false)
         .compile("shapeshifter_assimp");

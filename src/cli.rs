@@ -189,6 +189,10 @@ pub enum Command {
         overrides: Vec<String>,
         #[arg(long, default_value = "auto")]
         device: String,
+        /// Print a JSON record on stdout: every file written with its kind,
+        /// the time, the exit status.
+        #[arg(long)]
+        json: bool,
     },
     /// The whole pipeline: encode, train, sample, preview, evaluate. Several
     /// meshes: one sub-folder each; a failing mesh is reported and skipped.
@@ -343,6 +347,23 @@ pub enum Command {
         a: PathBuf,
         b: PathBuf,
     },
+    /// Write the USD asset of a run folder (what `run` writes after meshing):
+    /// each variant's variants/variant_NNN/variant.usda (mesh, finest
+    /// level's points, level files as volumes) and DIR/variants.usda, one
+    /// asset prim with a variant set over them.
+    ///
+    /// Example: shapeshifter usd out/tower --meters-per-unit 0.01
+    Usd {
+        /// A run folder (the output of `run`, or of its stages).
+        dir: PathBuf,
+        /// Metres per unit of the exemplar's coordinates [default: the run's
+        /// output.meters_per_unit, 1].
+        #[arg(long)]
+        meters_per_unit: Option<f64>,
+        /// Print what was written as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Build the degradation ladder of an encoded exemplar: its finest level
     /// smoothed (two strengths), washed out, colour-shuffled, a blob upsampled
     /// from level 0, and untrained networks' output; score every rung with
@@ -404,6 +425,12 @@ pub enum StageCmd {
         dir: PathBuf,
         #[arg(long, default_value_t = 0)]
         first: usize,
+        #[arg(short, default_value_t = 10)]
+        n: usize,
+    },
+    /// USD layers of variants 0 .. N-1 and DIR/variants.usda.
+    Usd {
+        dir: PathBuf,
         #[arg(short, default_value_t = 10)]
         n: usize,
     },
@@ -469,6 +496,11 @@ pub struct RunArgs {
     pub jobs: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Print one JSON record per exemplar on stdout as each finishes (JSON
+    /// Lines: every file written with its kind, stage times, exit status)
+    /// instead of the summary, for task graphs and scripts.
+    #[arg(long)]
+    pub json: bool,
     #[command(flatten)]
     pub setup: SetupArgs,
     #[command(flatten)]
@@ -627,16 +659,41 @@ fn device(spec: &str) -> Result<tch::Device> {
     Ok(device)
 }
 
-/// One exemplar through the whole pipeline into `out` ([`pipeline::run::run`]),
-/// and where everything went.
-fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &RunArgs, quiet: bool, threads: i32, wait: bool) -> Result<()> {
-    let _lock = lock::lock(out, lock::Mode::Exclusive, wait, "run")?;
-    let device = device(&args.setup.device)?;
+/// A command line the program refuses before any work (a bad `--set`, an
+/// unknown profile): exit status 2, as for clap's own usage errors.
+#[derive(Debug)]
+pub struct Usage(pub anyhow::Error);
+
+impl std::fmt::Display for Usage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let msg: Vec<String> = self.0.chain().map(|c| c.to_string()).collect();
+        f.write_str(&msg.join(": "))
+    }
+}
+
+impl std::error::Error for Usage {}
+
+/// The configuration a command line asks for, or a [`Usage`] error.
+fn load_config(profile: &str, overrides: &[String]) -> Result<Config> {
+    Config::load(profile, overrides).map_err(|e| Usage(e.into()).into())
+}
+
+/// One exemplar through the whole pipeline into `out` ([`pipeline::run::run`]).
+fn run_one(
+    exemplar: pipeline::ExemplarSource,
+    out: &std::path::Path,
+    args: &RunArgs,
+    quiet: bool,
+    threads: i32,
+    wait: bool,
+) -> Result<pipeline::run::RunSummary> {
     // The demo's own profile (sized for its 10-minute budget) unless one is given.
     let default = if matches!(exemplar, pipeline::ExemplarSource::Demo) { "demo" } else { "cpu" };
-    let mut config = Config::load(args.setup.profile(default), &args.setup.overrides)?;
+    let mut config = load_config(args.setup.profile(default), &args.setup.overrides)?;
     args.exemplar.apply(&mut config.encode);
-    pipeline::encode_options(&config).validate().map_err(shapeshifter::Error::from)?;
+    pipeline::encode_options(&config).validate().map_err(|e| Usage(shapeshifter::Error::from(e).into()))?;
+    let _lock = lock::lock(out, lock::Mode::Exclusive, wait, "run")?;
+    let device = device(&args.setup.device)?;
     let options = pipeline::run::RunOptions {
         config,
         device,
@@ -645,10 +702,14 @@ fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &Run
         seed: args.seed,
         jobs: args.jobs,
         threads,
-        progress: !quiet,
+        progress: !quiet && !args.json,
         exe: std::env::current_exe()?,
     };
-    let summary = pipeline::run::run(exemplar, out, &options)?;
+    Ok(pipeline::run::run(exemplar, out, &options)?)
+}
+
+/// `run`'s summary: where everything went, the stage times, the scores.
+fn print_run_summary(summary: &pipeline::run::RunSummary, out: &std::path::Path) {
     let paths = pipeline::RunPaths::new(out);
     println!("\n{} -> {}", summary.source_name, out.display());
     println!("  exemplar levels  {}", paths.exemplar().display());
@@ -658,16 +719,50 @@ fn run_one(exemplar: pipeline::ExemplarSource, out: &std::path::Path, args: &Run
         let names: Vec<String> = summary.empty.iter().map(|e| format!("{} (from level {})", e.name, e.first_empty)).collect();
         println!("  empty variants   {} of {}: {}", summary.empty.len(), summary.variants, names.join(", "));
     }
+    println!("  USD asset        {}", out.join(pipeline::layout::ASSET_USD).display());
     println!("  metrics          {}", paths.eval_json().display());
     println!("  contact sheet    {}", paths.contact_sheet().display());
     println!("  report           {}", paths.report().display());
     let stages: Vec<String> = summary.seconds.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect();
     println!("  time             {}  (total {:.0} s)", stages.join(", "), summary.total_seconds);
-    match summary.evaluation {
+    match &summary.evaluation {
         Some(e) => print!("{}", e.table()),
         None => println!("  (no variant could be scored: see the warning above)"),
     }
-    Ok(())
+}
+
+/// Runs exemplars one after the other, each into its folder; prints each
+/// one's summary (or JSON record) as it finishes. A failed exemplar is one
+/// error line (and a failed record) and the next goes on; a stop signal or a
+/// usage error ends the command. Exit status 1 when any failed.
+fn run_many(exemplars: &[(pipeline::ExemplarSource, String, PathBuf)], args: &RunArgs, quiet: bool, threads: i32, wait: bool) -> Result<ExitCode> {
+    let mut failed = 0;
+    for (source, name, out) in exemplars {
+        let t = std::time::Instant::now();
+        match run_one(*source, out, args, quiet, threads, wait) {
+            Ok(summary) if args.json => {
+                println!("{}", serde_json::to_string(&pipeline::run::RunRecord::done(name, out, &summary))?);
+            }
+            Ok(summary) => print_run_summary(&summary, out),
+            Err(e) => {
+                if shapeshifter::util::interrupt::requested().is_some() || e.downcast_ref::<Usage>().is_some() {
+                    return Err(e);
+                }
+                let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
+                eprintln!("error: {}", msg.join(": "));
+                if args.json {
+                    let record = pipeline::run::RunRecord::failed(name, out, msg.join(": "), t.elapsed().as_secs_f64());
+                    println!("{}", serde_json::to_string(&record)?);
+                }
+                failed += 1;
+            }
+        }
+    }
+    if failed > 0 {
+        log::error!("{failed} of {} inputs failed", exemplars.len());
+        return Ok(ExitCode::FAILURE);
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 /// What `mesh` reports per input.
@@ -711,7 +806,11 @@ fn run_stage(stage: StageCmd, quiet: bool, wait: bool) -> Result<()> {
     // Stages share their folder: a cluster's array tasks write one folder by design.
     let folder = match &stage {
         StageCmd::Encode { output, .. } => output,
-        StageCmd::Train { dir, .. } | StageCmd::Sample { dir, .. } | StageCmd::Mesh { dir, .. } | StageCmd::Eval { dir, .. } => dir,
+        StageCmd::Train { dir, .. }
+        | StageCmd::Sample { dir, .. }
+        | StageCmd::Mesh { dir, .. }
+        | StageCmd::Usd { dir, .. }
+        | StageCmd::Eval { dir, .. } => dir,
     };
     if !matches!(stage, StageCmd::Encode { .. }) && !folder.is_dir() {
         anyhow::bail!("{}: no such run folder", folder.display());
@@ -719,7 +818,7 @@ fn run_stage(stage: StageCmd, quiet: bool, wait: bool) -> Result<()> {
     let _lock = lock::lock(folder, lock::Mode::Shared, wait, "stage")?;
     match stage {
         StageCmd::Encode { mesh, output, profile, overrides } => {
-            let config = Config::load(&profile, &overrides)?;
+            let config = load_config(&profile, &overrides)?;
             let paths = pipeline::RunPaths::new(&output);
             let (_, levels) = pipeline::run_encode(pipeline::ExemplarSource::File(&mesh), &paths, &config)?;
             println!("encoded {} levels -> {}", levels.len(), paths.exemplar().display());
@@ -746,6 +845,11 @@ fn run_stage(stage: StageCmd, quiet: bool, wait: bool) -> Result<()> {
             let config = recorded(&dir)?;
             let done = pipeline::run_mesh(&pipeline::RunPaths::new(&dir), first..first + n, &config.mesh)?;
             println!("{done} variants meshed");
+        }
+        StageCmd::Usd { dir, n } => {
+            let config = recorded(&dir)?;
+            let usd = pipeline::run_usd(&pipeline::RunPaths::new(&dir), Some(n), config.output.meters_per_unit)?;
+            println!("{} ({} variant layers)", usd.asset.display(), usd.variants.len());
         }
         StageCmd::Eval { dir, n } => match pipeline::run_eval(&pipeline::RunPaths::new(&dir), n)? {
             Some(evaluation) => print!("{}", evaluation.table()),
@@ -836,7 +940,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Train { dir, models, level, resume, jobs, setup } => {
-            let config = Config::load(setup.profile("cpu"), &setup.overrides)?;
+            let config = load_config(setup.profile("cpu"), &setup.overrides)?;
             let device = device(&setup.device)?;
             let (manifest, levels) = dataset::read(&dir)?;
             let models = models.unwrap_or_else(|| dir.join("models"));
@@ -876,7 +980,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Sample { dir, output, models, n, first, seed, extent, stop_level, from, preview, overrides, device: dev } => {
+        Command::Sample { dir, output, models, n, first, seed, extent, stop_level, from, preview, overrides, device: dev, json } => {
+            let t = std::time::Instant::now();
             let models = models.unwrap_or_else(|| dir.join("models"));
             let recorded = models.join("config.toml");
             if !recorded.is_file() {
@@ -886,7 +991,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     dir.display()
                 );
             }
-            let config = Config::read(&recorded)?.with_overrides(&overrides)?;
+            let config = Config::read(&recorded)?.with_overrides(&overrides).map_err(|e| Usage(e.into()))?;
             let device = device(&dev)?;
             let (manifest, levels) = dataset::read(&dir)?;
             let ext = edit::parse_vec3(&extent).ok_or_else(|| anyhow::anyhow!("--extent '{extent}': expected X,Y,Z"))?;
@@ -914,7 +1019,26 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 };
                 dataset::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview, config.output.write_options())?;
             }
-            println!("{} variants -> {}", variants.len(), output.display());
+            if json {
+                // The files of the variant folders this command wrote.
+                let files: Vec<_> = (first..first + variants.len())
+                    .flat_map(|i| pipeline::layout::output_files(&pipeline::variant_dir(&output, i)))
+                    .collect();
+                let record = serde_json::json!({
+                    "models": models,
+                    "output": output,
+                    "status": "done",
+                    "exit_status": 0,
+                    "variants": variants.len(),
+                    "first": first,
+                    "seed": seed,
+                    "seconds": t.elapsed().as_secs_f64(),
+                    "files": files,
+                });
+                println!("{}", serde_json::to_string(&record)?);
+            } else {
+                println!("{} variants -> {}", variants.len(), output.display());
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Run { meshes, output, run } => {
@@ -922,27 +1046,19 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             // One folder per input, named as the batch commands name them
             // (a/x.off and b/x.off become a_x and b_x, never one folder).
             let names = pipeline::batch::output_names(&meshes)?;
-            let mut failed = 0;
-            for (m, name) in meshes.iter().zip(&names) {
-                let out = if several { output.join(name) } else { output.clone() };
-                if let Err(e) = run_one(pipeline::ExemplarSource::File(m), &out, &run, quiet, cli.threads, cli.wait) {
-                    if shapeshifter::util::interrupt::requested().is_some() {
-                        return Err(e);
-                    }
-                    let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-                    eprintln!("error: {}", msg.join(": "));
-                    failed += 1;
-                }
-            }
-            if failed > 0 {
-                log::error!("{failed} of {} inputs failed", meshes.len());
-                return Ok(ExitCode::FAILURE);
-            }
-            Ok(ExitCode::SUCCESS)
+            let exemplars: Vec<_> = meshes
+                .iter()
+                .zip(&names)
+                .map(|(m, name)| {
+                    let out = if several { output.join(name) } else { output.clone() };
+                    (pipeline::ExemplarSource::File(m), m.display().to_string(), out)
+                })
+                .collect();
+            run_many(&exemplars, &run, quiet, cli.threads, cli.wait)
         }
         Command::Demo { output, run } => {
-            run_one(pipeline::ExemplarSource::Demo, &output, &run, quiet, cli.threads, cli.wait)?;
-            Ok(ExitCode::SUCCESS)
+            let exemplars = [(pipeline::ExemplarSource::Demo, "(embedded)".to_string(), output)];
+            run_many(&exemplars, &run, quiet, cli.threads, cli.wait)
         }
         Command::Mesh { inputs, output, format, method, resolution, depth, faces, preview, batch } => {
             let resolution = resolution.or(depth.map(|d| 1 << d));
@@ -1037,7 +1153,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Slurm { meshes, output, n, seed, profile, overrides, partition, gpus_per_job, dry_run } => {
-            let config = Config::load(&profile, &overrides)?;
+            let config = load_config(&profile, &overrides)?;
             let opts = shapeshifter::pipeline::cluster::GraphOptions {
                 binary: std::env::current_exe()?,
                 profile,
@@ -1083,6 +1199,22 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     );
                 }
                 print!("{}", String::from_utf8_lossy(&o.stdout));
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Usd { dir, meters_per_unit, json } => {
+            let paths = pipeline::RunPaths::new(&dir);
+            let _lock = lock::lock(&dir, lock::Mode::Exclusive, cli.wait, "usd")?;
+            let config = paths.read_config()?;
+            let mpu = meters_per_unit.unwrap_or(config.output.meters_per_unit);
+            if !(mpu.is_finite() && mpu > 0.0) {
+                return Err(Usage(anyhow::anyhow!("--meters-per-unit {mpu}: expected a positive number")).into());
+            }
+            let outcome = pipeline::run_usd(&paths, None, mpu)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&outcome)?);
+            } else {
+                println!("{} ({} variant layers)", outcome.asset.display(), outcome.variants.len());
             }
             Ok(ExitCode::SUCCESS)
         }

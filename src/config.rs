@@ -43,7 +43,7 @@ pub struct Config {
 }
 
 /// Files that leave the program.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OutputConfig {
     /// Where each level's PointDataGrid goes: "separate" (level_K.points.vdb
@@ -51,6 +51,24 @@ pub struct OutputConfig {
     /// (one file; pyopenvdb's readAll then fails on it) or "none".
     #[serde(default)]
     pub points: crate::io::vdb::PointsLayout,
+    /// Metres per unit of the exemplar's coordinates, stated in the USD
+    /// layers (`metersPerUnit`); 1: the exemplar is in metres. Left out of
+    /// recorded configurations at 1.
+    #[serde(default = "one_f64", skip_serializing_if = "is_one_f64")]
+    pub meters_per_unit: f64,
+}
+
+fn one_f64() -> f64 {
+    1.0
+}
+fn is_one_f64(v: &f64) -> bool {
+    *v == 1.0
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig { points: Default::default(), meters_per_unit: 1.0 }
+    }
 }
 
 impl OutputConfig {
@@ -60,7 +78,7 @@ impl OutputConfig {
 }
 
 /// How `run` and `stage mesh` write each variant's mesh.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshConfig {
     /// Triangle budget of mesh.ply (quadric decimation, sharp features and
@@ -68,6 +86,36 @@ pub struct MeshConfig {
     pub faces: usize,
     /// Also write mesh.glb (glTF binary with vertex colours) beside mesh.ply.
     pub glb: bool,
+    /// Base-colour texture of a light mesh (`faces` > 0), texels across: a
+    /// UV atlas and a texture baked from the level's points, written as
+    /// mesh.obj + mesh.mtl + mesh_basecolor.png and as mesh.glb (mesh.ply
+    /// keeps vertex colours); 0: no texture. Left out of recorded
+    /// configurations at its default, so older run folders keep their digests.
+    #[serde(default = "default_texture", skip_serializing_if = "is_default_texture")]
+    pub texture: u32,
+}
+
+/// [`MeshConfig::texture`]'s default, texels across.
+pub const DEFAULT_TEXTURE: u32 = 2048;
+
+fn default_texture() -> u32 {
+    DEFAULT_TEXTURE
+}
+fn is_default_texture(v: &u32) -> bool {
+    *v == DEFAULT_TEXTURE
+}
+
+impl Default for MeshConfig {
+    fn default() -> Self {
+        MeshConfig { faces: 0, glb: false, texture: DEFAULT_TEXTURE }
+    }
+}
+
+impl MeshConfig {
+    /// The texture size a light mesh is baked at, if any.
+    pub fn texture_size(&self) -> Option<u32> {
+        (self.faces > 0 && self.texture > 0).then_some(self.texture)
+    }
 }
 
 /// Per-job resources of the cluster job graph, from the measured peaks of
@@ -391,6 +439,14 @@ impl Config {
 
     fn validate(&self) -> Result<()> {
         self.transfer.validate().map_err(Error::Invalid)?;
+        let t = self.mesh.texture;
+        if t != 0 && !(64..=16384).contains(&t) {
+            return Err(Error::Invalid(format!("mesh.texture = {t}: expected 0 (no texture) or 64 to 16384 texels")));
+        }
+        let m = self.output.meters_per_unit;
+        if !(m.is_finite() && m > 0.0) {
+            return Err(Error::Invalid(format!("output.meters_per_unit = {m}: expected a positive number")));
+        }
         let from = self.transfer.from_resolution;
         if from != 0 && from <= self.encode.coarsest_resolution {
             return Err(Error::Invalid(format!(
@@ -471,6 +527,8 @@ const OPTIONAL_KEYS: &[(&str, &str)] = &[
     ("encode", "normal_neighbours"),
     ("encode", "normal_orientation"),
     ("encode", "estimate_normals"),
+    ("mesh", "texture"),
+    ("output", "meters_per_unit"),
 ];
 
 fn apply_override(table: &mut toml::Table, spec: &str) -> Result<()> {
@@ -674,7 +732,7 @@ mod tests {
     fn mesh_settings_default_for_old_configs_and_take_overrides() {
         // (Configurations from before [mesh] had no [transfer] either.)
         let a = Config::load("cpu", &["transfer.from_resolution=0".into()]).unwrap();
-        assert_eq!(a.mesh, MeshConfig { faces: 0, glb: false });
+        assert_eq!(a.mesh, MeshConfig { faces: 0, glb: false, texture: DEFAULT_TEXTURE });
         // A configuration recorded before [mesh] existed still reads.
         let old: String = a.to_toml().split("[mesh]").next().unwrap().to_string();
         let dir = tempfile::tempdir().unwrap();
@@ -682,7 +740,12 @@ mod tests {
         std::fs::write(&p, old).unwrap();
         assert_eq!(Config::read(&p).unwrap(), a);
         let b = a.with_overrides(&["mesh.faces=50000".into(), "mesh.glb=true".into()]).unwrap();
-        assert_eq!(b.mesh, MeshConfig { faces: 50000, glb: true });
+        assert_eq!(b.mesh, MeshConfig { faces: 50000, glb: true, texture: DEFAULT_TEXTURE });
+        let c = a.with_overrides(&["mesh.faces=20000".into(), "mesh.texture=1024".into()]).unwrap();
+        assert_eq!(c.mesh.texture_size(), Some(1024));
+        assert!(c.to_toml().contains("texture = 1024"));
+        assert!(!a.to_toml().contains("texture"), "the default is left out of recorded configurations");
+        assert_eq!(a.mesh.texture_size(), None);
         assert!(a.with_overrides(&["mesh.faces=-1".into()]).is_err());
     }
 }

@@ -1,4 +1,6 @@
-//! The `shapeshifter` command: parse, call the library, map errors to exit codes.
+//! The `shapeshifter` command: parse, call the library, map errors to exit codes:
+//! 0 done; 1 an input failed (the others were still done); 2 bad usage (the
+//! command line, a `--set`, a profile); 128 + N stopped by signal N.
 
 use std::process::ExitCode;
 
@@ -29,6 +31,10 @@ fn main() -> ExitCode {
             // One line: the chain of causes joined.
             let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
             eprintln!("error: {}", msg.join(": "));
+            // A command line refused before any work: 2, as clap's own errors.
+            if e.downcast_ref::<cli::Usage>().is_some() {
+                return ExitCode::from(2);
+            }
             ExitCode::FAILURE
         }
     }

@@ -2,13 +2,17 @@
 //! DCC tools that import glTF (Blender, Godot, Unity, three.js).
 //!
 //! One file holds the JSON scene (one node, one mesh, one triangle primitive)
-//! and one binary buffer with four tightly packed views, each 4-byte aligned
+//! and one binary buffer with tightly packed views, each 4-byte aligned
 //! because every component is 4 bytes:
 //! 1. POSITION: float VEC3 with its min/max (glTF requires the bounds);
 //! 2. NORMAL: float VEC3, unit length (area-weighted vertex normals);
 //! 3. COLOR_0 (only for a coloured mesh): float VEC3, linear (see
 //!    [`srgb_to_linear`]);
-//! 4. indices: unsigned int SCALAR, 3 per triangle.
+//! 4. TEXCOORD_0 (only for a textured mesh): float VEC2, v = 0 the image's
+//!    top row (glTF's convention), vertices split where corners' UVs differ;
+//! 5. indices: unsigned int SCALAR, 3 per triangle;
+//! 6. a textured mesh's image, PNG, as the material's `baseColorTexture`
+//!    (then no COLOR_0: glTF would multiply the two).
 //!
 //! Positions are written as they are: the exemplar's own frame and units.
 //! glTF says +Y is up and units are metres; an exemplar modelled Y-up (the
@@ -91,6 +95,35 @@ fn push_view(
     })
 }
 
+/// A textured mesh's vertices split so that each (vertex, UV) pair is one
+/// glTF vertex (glTF has one TEXCOORD_0 per vertex, our UVs are per corner),
+/// with glTF's UV convention (v = 0 the image's top row).
+fn split_at_uv_seams(mesh: &Mesh, uvs: &[glam::Vec2]) -> (Mesh, Vec<glam::Vec2>) {
+    let mut index: std::collections::HashMap<(u32, u32, u32), u32> = std::collections::HashMap::new();
+    let (mut positions, mut out_uvs, mut from) = (Vec::new(), Vec::new(), Vec::new());
+    let triangles = mesh
+        .triangles
+        .iter()
+        .enumerate()
+        .map(|(t, tri)| {
+            std::array::from_fn(|k| {
+                let uv = uvs[3 * t + k];
+                *index.entry((tri[k], uv.x.to_bits(), uv.y.to_bits())).or_insert_with(|| {
+                    positions.push(mesh.positions[tri[k] as usize]);
+                    out_uvs.push(glam::Vec2::new(uv.x, 1.0 - uv.y));
+                    from.push(tri[k] as usize);
+                    (positions.len() - 1) as u32
+                })
+            })
+        })
+        .collect();
+    let colours = match mesh.vertex_colours() {
+        Some(c) => crate::io::mesh::MeshColours::PerVertex(from.iter().map(|&i| c[i]).collect()),
+        None => crate::io::mesh::MeshColours::None,
+    };
+    (Mesh { name: mesh.name.clone(), positions, triangles, colours, texture: None }, out_uvs)
+}
+
 /// The mesh as the bytes of a `.glb` file. Errors: no triangles, or a mesh
 /// too large for glTF's 32-bit lengths.
 pub fn to_bytes(mesh: &Mesh) -> Result<Vec<u8>> {
@@ -99,9 +132,21 @@ pub fn to_bytes(mesh: &Mesh) -> Result<Vec<u8>> {
     if mesh.triangles.is_empty() {
         return Err(Error::Invalid("a mesh without triangles cannot be written as glTF".into()));
     }
-    let colours = mesh.vertex_colours();
+    // A texture (one image: what baking makes) becomes baseColorTexture, with
+    // COLOR_0 only where it tints the image (glTF multiplies the two).
+    let split;
+    let (mesh, texture, uvs) = match &mesh.texture {
+        Some(t) if t.more.is_empty() && t.image.width() > 0 => {
+            let (m, uvs) = split_at_uv_seams(mesh, &t.uvs);
+            split = m;
+            (&split, Some(t), uvs)
+        }
+        _ => (mesh, None, Vec::new()),
+    };
+    let colours = mesh.vertex_colours().filter(|_| texture.is_none_or(|t| t.tinted));
     // Bytes per vertex (position, normal, colour) and per triangle.
-    let size = mesh.positions.len() * if colours.is_some() { 36 } else { 24 } + mesh.triangles.len() * 12;
+    let image_bytes = texture.map_or(0, |t| 3 * t.image.width() as usize * t.image.height() as usize);
+    let size = mesh.positions.len() * if colours.is_some() { 36 } else { 24 } + uvs.len() * 8 + mesh.triangles.len() * 12 + image_bytes;
     if size > u32::MAX as usize - 4096 {
         return Err(Error::Invalid(format!("{} MB of mesh data exceed a .glb file's 4 GiB", size >> 20)));
     }
@@ -124,6 +169,11 @@ pub fn to_bytes(mesh: &Mesh) -> Result<Vec<u8>> {
         let colour = push_view(&mut root, &mut bin, vec3_words(&linear).into_iter(), n, vertex, None);
         attributes.insert(Valid(json::mesh::Semantic::Colors(0)), colour);
     }
+    if !uvs.is_empty() {
+        let words = uvs.iter().flat_map(|p| p.to_array()).map(f32::to_le_bytes).collect::<Vec<_>>();
+        let uv = push_view(&mut root, &mut bin, words.into_iter(), n, (ComponentType::F32, Type::Vec2, Target::ArrayBuffer), None);
+        attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), uv);
+    }
     let indices = push_view(
         &mut root,
         &mut bin,
@@ -132,6 +182,55 @@ pub fn to_bytes(mesh: &Mesh) -> Result<Vec<u8>> {
         (ComponentType::U32, Type::Scalar, Target::ElementArrayBuffer),
         None,
     );
+    // The image: a PNG in the binary buffer (views of images take no target).
+    let base_colour_texture = match texture {
+        Some(t) => {
+            let mut png = std::io::Cursor::new(Vec::new());
+            t.image.write_to(&mut png, image::ImageFormat::Png).map_err(|e| Error::Invalid(format!("texture PNG: {e}")))?;
+            let png = png.into_inner();
+            let offset = bin.len();
+            bin.extend_from_slice(&png);
+            while bin.len() % 4 != 0 {
+                bin.push(0);
+            }
+            let view = root.push(json::buffer::View {
+                buffer: json::Index::new(0),
+                byte_length: USize64(png.len() as u64),
+                byte_offset: Some(USize64(offset as u64)),
+                byte_stride: None,
+                name: None,
+                target: None,
+                extensions: None,
+                extras: Default::default(),
+            });
+            let image = root.push(json::Image {
+                buffer_view: Some(view),
+                mime_type: Some(json::image::MimeType("image/png".into())),
+                name: Some("base colour".into()),
+                uri: None,
+                extensions: None,
+                extras: Default::default(),
+            });
+            let sampler = root.push(json::texture::Sampler {
+                mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
+                min_filter: Some(Valid(json::texture::MinFilter::LinearMipmapLinear)),
+                wrap_s: Valid(json::texture::WrappingMode::ClampToEdge),
+                wrap_t: Valid(json::texture::WrappingMode::ClampToEdge),
+                name: None,
+                extensions: None,
+                extras: Default::default(),
+            });
+            let tex = root.push(json::Texture {
+                sampler: Some(sampler),
+                source: image,
+                name: None,
+                extensions: None,
+                extras: Default::default(),
+            });
+            Some(json::texture::Info { index: tex, tex_coord: 0, extensions: None, extras: Default::default() })
+        }
+        None => None,
+    };
     root.push(json::Buffer {
         byte_length: USize64(bin.len() as u64),
         name: None,
@@ -145,9 +244,10 @@ pub fn to_bytes(mesh: &Mesh) -> Result<Vec<u8>> {
         pbr_metallic_roughness: json::material::PbrMetallicRoughness {
             metallic_factor: json::material::StrengthFactor(0.0),
             roughness_factor: json::material::StrengthFactor(1.0),
+            base_color_texture: base_colour_texture.clone(),
             ..Default::default()
         },
-        name: Some("vertex colours".into()),
+        name: Some(if base_colour_texture.is_some() { "baked texture" } else { "vertex colours" }.into()),
         ..Default::default()
     });
     let name = if mesh.name.is_empty() { "mesh".to_string() } else { mesh.name.clone() };

@@ -177,6 +177,43 @@ impl Mesh {
         base
     }
 
+    /// Drops the triangles that carry no surface (a repeated vertex, or zero
+    /// area in float32: two corners at one position), with their corners'
+    /// colours, UVs and image indices; returns how many. The readers drop
+    /// them too, so a mesh cleaned before it is written reads back whole.
+    pub fn drop_degenerate_triangles(&mut self) -> usize {
+        let p = &self.positions;
+        let keep: Vec<bool> = self
+            .triangles
+            .iter()
+            .map(|&[a, b, c]| a != b && b != c && a != c && (p[b as usize] - p[a as usize]).cross(p[c as usize] - p[a as usize]).length() > 0.0)
+            .collect();
+        let dropped = keep.iter().filter(|k| !**k).count();
+        if dropped == 0 {
+            return 0;
+        }
+        let mut k = keep.iter();
+        self.triangles.retain(|_| *k.next().unwrap());
+        fn corners<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut i = 0;
+            v.retain(|_| {
+                i += 1;
+                keep[(i - 1) / 3]
+            });
+        }
+        if let MeshColours::PerCorner(c) = &mut self.colours {
+            corners(c, &keep);
+        }
+        if let Some(t) = &mut self.texture {
+            corners(&mut t.uvs, &keep);
+            if !t.triangle_image.is_empty() {
+                let mut k = keep.iter();
+                t.triangle_image.retain(|_| *k.next().unwrap());
+            }
+        }
+        dropped
+    }
+
     /// Area-weighted vertex normals, unit length; +Z for a vertex whose
     /// triangles have no area (or that no triangle uses).
     pub fn vertex_normals(&self) -> Vec<Vec3> {
@@ -317,40 +354,13 @@ fn check_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
     if let Some(i) = mesh.positions.iter().position(|p| !p.is_finite()) {
         return Err(Error::file(path, format!("vertex {i} has a NaN or infinite coordinate")));
     }
-    let p = &mesh.positions;
-    let keep: Vec<bool> = mesh
-        .triangles
-        .iter()
-        .map(|&[a, b, c]| a != b && b != c && a != c && (p[b as usize] - p[a as usize]).cross(p[c as usize] - p[a as usize]).length() > 0.0)
-        .collect();
-    let dropped = keep.iter().filter(|k| !**k).count();
-    if dropped == mesh.triangles.len() {
+    let total = mesh.triangles.len();
+    let dropped = mesh.drop_degenerate_triangles();
+    if dropped == total {
         return Err(Error::file(path, format!("all {dropped} triangles are degenerate (zero area or repeated vertices)")));
     }
     if dropped > 0 {
         log::warn!("{}: dropped {dropped} degenerate triangles", path.display());
-        let per_triangle = |v: &mut Vec<[u32; 3]>| {
-            let mut k = keep.iter();
-            v.retain(|_| *k.next().unwrap());
-        };
-        per_triangle(&mut mesh.triangles);
-        fn corners<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
-            let mut i = 0;
-            v.retain(|_| {
-                i += 1;
-                keep[(i - 1) / 3]
-            });
-        }
-        if let MeshColours::PerCorner(c) = &mut mesh.colours {
-            corners(c, &keep);
-        }
-        if let Some(t) = &mut mesh.texture {
-            corners(&mut t.uvs, &keep);
-            if !t.triangle_image.is_empty() {
-                let mut k = keep.iter();
-                t.triangle_image.retain(|_| *k.next().unwrap());
-            }
-        }
     }
     Ok(mesh)
 }
@@ -446,9 +456,11 @@ fn load_texture(path: &Path, data: &bridge::MeshData) -> Option<image::RgbImage>
 }
 
 /// Writes a mesh, in the format its extension names (`WRITE_EXTENSIONS`),
-/// atomically. PLY (`binary` or ASCII) and glTF binary (`.glb`) keep vertex
-/// colours (per-corner colours are averaged onto vertices); OBJ, OFF and STL
-/// are written without colour.
+/// atomically. PLY (`binary` or ASCII) keeps vertex colours (per-corner
+/// colours are averaged onto vertices); glTF binary (`.glb`) keeps them or a
+/// mesh's texture; a textured mesh's OBJ is OBJ + MTL + PNG
+/// ([`crate::io::obj::write_textured`]); otherwise OBJ, OFF and STL are
+/// written without colour.
 pub fn save(mesh: &Mesh, path: &Path, binary: bool) -> Result<()> {
     let ext = extension(path);
     if !WRITE_EXTENSIONS.contains(&ext.as_str()) {
@@ -457,6 +469,9 @@ pub fn save(mesh: &Mesh, path: &Path, binary: bool) -> Result<()> {
     if ext == "glb" {
         let bytes = crate::io::glb::to_bytes(mesh).map_err(|e| Error::file(path, e.to_string()))?;
         return write_file(path, &bytes);
+    }
+    if ext == "obj" && mesh.texture.is_some() {
+        return crate::io::obj::write_textured(mesh, path);
     }
     let vertex_colours: Vec<f32> = match mesh.vertex_colours() {
         Some(c) if ext == "ply" => c.iter().flat_map(|c| c.to_array()).collect(),

@@ -16,4 +16,5 @@ pub mod poisson;
 pub(crate) mod mesh_check;
 pub(crate) mod obj;
 pub mod probe;
+pub mod usd;
 pub mod vdb;

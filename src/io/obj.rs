@@ -230,6 +230,54 @@ pub fn read(bytes: &[u8], dir: &Path, name: &str) -> Result<(MeshData, Dropped),
     Ok((out, dropped))
 }
 
+/// The image file a textured OBJ's material names: `<stem>_basecolor.png`
+/// beside the `.obj`.
+pub fn texture_path(obj: &Path) -> std::path::PathBuf {
+    let stem = obj.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "mesh".into());
+    obj.with_file_name(format!("{stem}_basecolor.png"))
+}
+
+/// Writes a textured mesh as OBJ + MTL + PNG (`X.obj`, `X.mtl`,
+/// `X_basecolor.png`), each atomically, the image and material first so an
+/// `.obj` never names a file that is not there. Corners carry `v/vt/vn`;
+/// one `vt` per corner (OBJ's v = 0 is the image's bottom row, as in
+/// [`Texture`](crate::io::mesh::Texture)); the material is matte, its
+/// `map_Kd` the image.
+pub fn write_textured(mesh: &crate::io::mesh::Mesh, path: &Path) -> crate::error::Result<()> {
+    use std::fmt::Write as _;
+    use crate::error::Error;
+    let tex = mesh.texture.as_ref().ok_or_else(|| Error::file(path, "the mesh has no texture"))?;
+    let image_path = texture_path(path);
+    let mtl_path = path.with_extension("mtl");
+    let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let mut png = std::io::Cursor::new(Vec::new());
+    tex.image.write_to(&mut png, image::ImageFormat::Png).map_err(|e| Error::file(&image_path, e.to_string()))?;
+    crate::util::fs::write_file(&image_path, png.into_inner())?;
+    let mtl = format!(
+        "# {}\nnewmtl baked\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nNs 1\nillum 1\nmap_Kd {}\n",
+        crate::io::vdb::CREATOR,
+        name(&image_path)
+    );
+    crate::util::fs::write_file(&mtl_path, mtl)?;
+    let normals = mesh.vertex_normals();
+    let mut s = String::with_capacity(mesh.positions.len() * 80 + mesh.triangles.len() * 60);
+    let _ = write!(s, "# {}\nmtllib {}\nusemtl baked\n", crate::io::vdb::CREATOR, name(&mtl_path));
+    for p in &mesh.positions {
+        let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
+    }
+    for n in &normals {
+        let _ = writeln!(s, "vn {} {} {}", n.x, n.y, n.z);
+    }
+    for uv in &tex.uvs {
+        let _ = writeln!(s, "vt {} {}", uv.x, uv.y);
+    }
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let c = |k: usize| format!("{}/{}/{}", tri[k] + 1, 3 * t + k + 1, tri[k] + 1);
+        let _ = writeln!(s, "f {} {} {}", c(0), c(1), c(2));
+    }
+    crate::util::fs::write_file(path, s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

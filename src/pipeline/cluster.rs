@@ -143,6 +143,8 @@ pub fn job_graph(mesh: &Path, out: &Path, config: &Config, opts: &GraphOptions) 
     meshing += &shard_lines;
     let _ = writeln!(meshing, "exec {exe} stage mesh {run} --first \"$FIRST\" -n \"$COUNT\"");
     let mut eval = header("eval", c.eval_mem_gb, c.job_minutes, None, false);
+    // The USD asset over every variant, then the scores.
+    let _ = writeln!(eval, "{exe} stage usd {run} -n {} || exit $?", opts.n);
     let _ = writeln!(eval, "exec {exe} stage eval {run} -n {}", opts.n);
 
     Ok(vec![

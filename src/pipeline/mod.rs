@@ -17,7 +17,9 @@
 
 pub mod batch;
 pub mod cluster;
+pub mod layout;
 pub mod run;
+pub mod usd;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -688,9 +690,13 @@ pub fn mesh_level(
 
 /// Meshes the finest level of every variant folder into `mesh.ply` (and
 /// `mesh.glb` when `settings.glb`), decimated to `settings.faces` triangles
-/// when that is not 0, and `mesh.png`; a variant that fails to mesh is
-/// reported and skipped.
+/// when that is not 0, and `mesh.png`. A light mesh is also baked into a
+/// texture (`settings.texture_size()`): `mesh.obj` + `mesh.mtl` +
+/// `mesh_basecolor.png` and a textured `mesh.glb`. A variant that fails to
+/// mesh is reported and skipped; one whose texture fails keeps its vertex
+/// colours, with a warning.
 pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settings: &MeshConfig) -> Result<usize> {
+    use layout::{MESH_GLB, MESH_MTL, MESH_OBJ, MESH_PLY, MESH_PREVIEW, MESH_TEXTURE};
     let mut done = 0;
     for dir in dirs {
         crate::util::interrupt::check()?;
@@ -704,16 +710,27 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settin
                 continue;
             }
         };
-        let out = dir.join("mesh.ply");
-        let glb = dir.join("mesh.glb");
-        let d = digest(&[
-            &dataset::file_sha256(&finest_file).unwrap_or_default(),
-            &resolution.to_string(),
-            &exemplar_open.to_string(),
-            &settings.faces.to_string(),
-            &settings.glb.to_string(),
-        ]);
-        if is_done(dir, "mesh", &d) && out.is_file() && (glb.is_file() || !settings.glb) {
+        let out = dir.join(MESH_PLY);
+        let glb = dir.join(MESH_GLB);
+        let texture = settings.texture_size();
+        let mut parts = vec![
+            dataset::file_sha256(&finest_file).unwrap_or_default(),
+            resolution.to_string(),
+            exemplar_open.to_string(),
+            settings.faces.to_string(),
+            settings.glb.to_string(),
+        ];
+        // Only a baked mesh's digest names its texture: meshes made before
+        // textures existed stay reused.
+        if let Some(size) = texture {
+            parts.push(format!("texture {size}"));
+        }
+        let d = digest(&parts.iter().map(String::as_str).collect::<Vec<_>>());
+        let textured_files = [MESH_OBJ, MESH_MTL, MESH_TEXTURE].map(|f| dir.join(f));
+        let complete = out.is_file()
+            && (glb.is_file() || !(settings.glb || texture.is_some()))
+            && (texture.is_none() || textured_files.iter().all(|f| f.is_file()));
+        if is_done(dir, "mesh", &d) && complete {
             done += 1;
             continue;
         }
@@ -724,17 +741,30 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settin
                 continue;
             }
         };
-        // No glTF file from an earlier setting beside a new mesh.ply.
+        // No glTF or textured file from an earlier setting beside a new mesh.ply.
         let _ = std::fs::remove_file(&glb);
+        for f in &textured_files {
+            let _ = std::fs::remove_file(f);
+        }
         match mesh_level(&finest, exemplar_open, None, Some(resolution)).and_then(|(m, _)| light_mesh(m, settings.faces)) {
             Ok(mesh) => {
                 crate::io::mesh::save(&mesh, &out, true)?;
-                if settings.glb {
-                    crate::io::mesh::save(&mesh, &glb, true)?;
+                let baked = texture.and_then(|size| match bake_level_texture(&mesh, &finest, size) {
+                    Ok(m) => Some(m),
+                    Err(e) => {
+                        log::warn!("{}: no texture, vertex colours only: {e}", dir.display());
+                        None
+                    }
+                });
+                if let Some(textured) = &baked {
+                    crate::io::mesh::save(textured, &textured_files[0], true)?;
+                }
+                if settings.glb || baked.is_some() {
+                    crate::io::mesh::save(baked.as_ref().unwrap_or(&mesh), &glb, true)?;
                 }
                 let view = render::RenderOptions { up: Some(finest.frame.up), ..render::preview_options() };
-                let img = render::render_mesh(&mesh, &view)?;
-                render::save_png(&img, &dir.join("mesh.png"))?;
+                let img = render::render_mesh(baked.as_ref().unwrap_or(&mesh), &view)?;
+                render::save_png(&img, &dir.join(MESH_PREVIEW))?;
                 mark_done(dir, "mesh", &d, t.elapsed().as_secs_f64())?;
                 done += 1;
             }
@@ -748,23 +778,51 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settin
     Ok(done)
 }
 
-/// `mesh` decimated to `faces` triangles (0: as it is), with a log line
-/// saying what the decimation did.
-pub fn light_mesh(mesh: Mesh, faces: usize) -> Result<Mesh> {
-    if faces == 0 {
-        return Ok(mesh);
-    }
-    let t = std::time::Instant::now();
-    let (light, report) = crate::io::mesh::decimate(&mesh, &crate::io::mesh::DecimateOptions::new(faces))?;
+/// `mesh` (made from `level`) with a UV atlas and a texture of `size`
+/// texels baked from the level's points ([`crate::recon::bake`]).
+pub fn bake_level_texture(mesh: &Mesh, level: &Level, size: u32) -> Result<Mesh> {
+    let points = oriented_points(level)?;
+    let (textured, r) = crate::recon::bake::bake_texture(mesh, &points, size)?;
     log::info!(
-        "decimated {} -> {} triangles (budget {faces}, {} sharp edges kept) in {:.1} s",
-        report.faces_before,
-        report.faces_after,
-        report.feature_edges,
-        t.elapsed().as_secs_f64()
+        "texture: {} charts in {}x{} texels ({:.0}% used), {} -> {} vertices, unwrap {:.1} s, bake {:.1} s",
+        r.charts,
+        r.width,
+        r.height,
+        100.0 * r.utilization,
+        r.vertices_before,
+        r.vertices_after,
+        r.seconds_unwrap,
+        r.seconds_bake
     );
-    if report.faces_after > faces {
-        log::warn!("{} triangles remain above the budget of {faces}: no further collapse was legal", report.faces_after);
+    Ok(textured)
+}
+
+/// `mesh` decimated to `faces` triangles (0: as many as it has), with a
+/// log line saying what the decimation did, and without zero-area
+/// triangles: decimation leaves a few (corners copied onto one position),
+/// they carry no surface and every reader drops them, so a mesh file and
+/// the USD layer read from it count the same triangles.
+pub fn light_mesh(mesh: Mesh, faces: usize) -> Result<Mesh> {
+    let mut light = if faces == 0 {
+        mesh
+    } else {
+        let t = std::time::Instant::now();
+        let (light, report) = crate::io::mesh::decimate(&mesh, &crate::io::mesh::DecimateOptions::new(faces))?;
+        log::info!(
+            "decimated {} -> {} triangles (budget {faces}, {} sharp edges kept) in {:.1} s",
+            report.faces_before,
+            report.faces_after,
+            report.feature_edges,
+            t.elapsed().as_secs_f64()
+        );
+        if report.faces_after > faces {
+            log::warn!("{} triangles remain above the budget of {faces}: no further collapse was legal", report.faces_after);
+        }
+        light
+    };
+    let dropped = light.drop_degenerate_triangles();
+    if dropped > 0 {
+        log::debug!("{dropped} zero-area triangles left out of the mesh");
     }
     Ok(light)
 }
@@ -922,6 +980,7 @@ impl RunPaths {
 }
 
 /// Where an exemplar comes from.
+#[derive(Clone, Copy, Debug)]
 pub enum ExemplarSource<'a> {
     File(&'a Path),
     /// The embedded demo tower.
@@ -981,6 +1040,27 @@ pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>, settings: &Mesh
         })
         .collect();
     mesh_stage(&dirs, manifest.open_surface, 256, settings)
+}
+
+/// The USD step ([`usd::usd_stage`]) over variants `0..n`, or every variant
+/// folder there is (None: the `usd` command on an existing run folder):
+/// each sampled variant's `variant.usda`, then `OUT/variants.usda`.
+pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Result<usd::UsdOutcome> {
+    let manifest = dataset::read_manifest(&paths.exemplar())?;
+    let dirs: Vec<PathBuf> = match n {
+        Some(n) => (0..n).map(|i| variant_dir(&paths.variants(), i)).filter(|d| d.is_dir()).collect(),
+        None => {
+            let mut dirs: Vec<PathBuf> = std::fs::read_dir(paths.variants())
+                .map_err(|e| Error::file(&paths.variants(), e.to_string()))?
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.is_dir() && p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("variant_")))
+                .collect();
+            dirs.sort();
+            dirs
+        }
+    };
+    usd::usd_stage(&paths.root, &dirs, &manifest.exemplar, meters_per_unit)
 }
 
 /// Stage 5: scores variants `0..n` against the exemplar into

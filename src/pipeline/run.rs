@@ -121,7 +121,75 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     stage("mesh", t);
 
     let t = Instant::now();
+    let usd = super::run_usd(&paths, Some(o.n), config.output.meters_per_unit)?;
+    log::info!("usd: {} ({} variant layers)", usd.asset.display(), usd.variants.len());
+    stage("usd", t);
+
+    let t = Instant::now();
     let evaluation = super::run_eval(&paths, o.n)?;
     stage("evaluate", t);
     Ok(RunSummary { source_name, variants: dirs.len(), seconds, total_seconds: t0.elapsed().as_secs_f64(), evaluation, empty })
+}
+
+/// One stage's wall time in a [`RunRecord`].
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StageTime {
+    pub stage: &'static str,
+    pub seconds: f64,
+}
+
+/// What `run --json` prints per exemplar (one line of JSON Lines): where it
+/// went, whether it finished, every file with its kind, the stage times.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunRecord {
+    /// The exemplar file as given ("(embedded)" for the demo).
+    pub exemplar: String,
+    pub output: PathBuf,
+    /// "done" or "failed".
+    pub status: &'static str,
+    /// The exit status this exemplar alone would give (0 done, 1 failed).
+    pub exit_status: u8,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    pub variants: usize,
+    /// Variants that pruned to nothing (no mesh, not scored).
+    pub empty_variants: Vec<String>,
+    pub stages: Vec<StageTime>,
+    pub total_seconds: f64,
+    /// Every output under `output`, sorted by path ([`super::layout`]).
+    pub files: Vec<super::layout::OutputFile>,
+}
+
+impl RunRecord {
+    pub fn done(exemplar: &str, out: &Path, s: &RunSummary) -> Self {
+        RunRecord {
+            exemplar: exemplar.into(),
+            output: out.to_path_buf(),
+            status: "done",
+            exit_status: 0,
+            error: None,
+            variants: s.variants,
+            empty_variants: s.empty.iter().map(|e| e.name.clone()).collect(),
+            stages: s.seconds.iter().map(|&(stage, seconds)| StageTime { stage, seconds }).collect(),
+            total_seconds: s.total_seconds,
+            files: super::layout::output_files(out),
+        }
+    }
+
+    /// An exemplar that failed: its one error line, and what it left (a
+    /// finished stage's files stay, for the next run to reuse).
+    pub fn failed(exemplar: &str, out: &Path, error: String, seconds: f64) -> Self {
+        RunRecord {
+            exemplar: exemplar.into(),
+            output: out.to_path_buf(),
+            status: "failed",
+            exit_status: 1,
+            error: Some(error),
+            variants: 0,
+            empty_variants: Vec::new(),
+            stages: Vec::new(),
+            total_seconds: seconds,
+            files: super::layout::output_files(out),
+        }
+    }
 }

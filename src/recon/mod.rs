@@ -34,6 +34,7 @@
 //! in the README's performance section (`make bench-poisson`).
 
 mod apss;
+pub mod bake;
 mod contour;
 pub(crate) mod spatial;
 #[cfg(test)]

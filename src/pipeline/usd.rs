@@ -1,0 +1,167 @@
+//! The USD step: each variant folder's `variant.usda` (its mesh, its finest
+//! level's points, its level files as volumes) and the run's
+//! `variants.usda`, an asset with one variant set over them
+//! ([`crate::io::usd`] writes the text). Read from the files the other
+//! stages wrote, so `run`, `stage mesh` and the `usd` command for an
+//! existing run folder take this one path.
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+use crate::error::{Error, Result};
+use crate::io::usd::{self, LevelVolume, MeshPrim, PointsPrim, StageMetadata, VariantLayer};
+use crate::io::{mesh, vdb};
+
+use super::layout::{ASSET_USD, MESH_OBJ, MESH_PLY, MESH_TEXTURE, VARIANT_USD};
+
+/// What the variant layer holds, for the log and `--json` (counts 0 where
+/// the layer was reused as it was).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct VariantUsd {
+    pub path: PathBuf,
+    pub triangles: usize,
+    pub textured: bool,
+    pub points: usize,
+    pub levels: usize,
+}
+
+/// Stage metadata of a run's layers: the exemplar's up axis (from its finest
+/// level), `meters_per_unit`, and who wrote it from what.
+pub fn metadata(up: crate::level::Up, meters_per_unit: f64, exemplar: &str) -> StageMetadata {
+    StageMetadata { up, meters_per_unit, doc: format!("{}: variants of {exemplar}", vdb::CREATOR) }
+}
+
+/// Writes `dir/variant.usda` from the folder's files: the textured
+/// `mesh.obj` where there is one, else `mesh.ply`, else no mesh; the finest
+/// level's points; every `level_K.vdb` as a choice of the volume's `level`
+/// set. Errors: no level files, or a file that does not read.
+pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result<VariantUsd> {
+    let files = crate::eval::evaluate::level_files(dir)?;
+    let mut levels = Vec::with_capacity(files.len());
+    let mut finest = None;
+    for (k, path) in &files {
+        let (level, _) = vdb::read_level(path)?;
+        let points = crate::geom::points::OrientedPoints::from_level(&level);
+        let (lo, hi) = points.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let half = Vec3::splat(points.spacing * 0.5);
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        levels.push(LevelVolume { index: *k, file: format!("./{name}"), bounds: (lo - half, hi + half) });
+        finest = Some((level, points));
+    }
+    let (finest, mut points) = finest.expect("level_files returns at least one");
+    if points.is_empty() {
+        return Err(Error::file(dir, "its finest level has no surface voxels (pruned to nothing)"));
+    }
+    points.normals.iter_mut().for_each(|n| *n = n.normalize_or_zero());
+
+    let obj = dir.join(MESH_OBJ);
+    let ply = dir.join(MESH_PLY);
+    let m = if obj.is_file() && dir.join(MESH_TEXTURE).is_file() {
+        Some(mesh::load(&obj)?)
+    } else if ply.is_file() {
+        Some(mesh::load(&ply)?)
+    } else {
+        None
+    };
+    let normals = m.as_ref().map(|m| m.vertex_normals()).unwrap_or_default();
+    let colours = m.as_ref().and_then(|m| m.vertex_colours());
+    let mesh_prim = m.as_ref().map(|m| MeshPrim {
+        positions: &m.positions,
+        triangles: &m.triangles,
+        normals: &normals,
+        colours: colours.as_deref(),
+        texture: m.texture.as_ref().filter(|t| t.uvs.len() == 3 * m.triangles.len()).map(|t| (t.uvs.as_slice(), format!("./{MESH_TEXTURE}"))),
+    });
+    let layer = VariantLayer {
+        mesh: mesh_prim,
+        points: (!points.is_empty()).then(|| PointsPrim {
+            positions: &points.positions,
+            normals: &points.normals,
+            colours: &points.colours,
+            width: points.spacing,
+        }),
+        levels,
+    };
+    let text = usd::variant_layer(&layer, &metadata(finest.frame.up, meters_per_unit, exemplar));
+    let path = dir.join(VARIANT_USD);
+    crate::util::fs::write_file(&path, text)?;
+    Ok(VariantUsd {
+        path,
+        triangles: m.as_ref().map_or(0, |m| m.triangles.len()),
+        textured: layer.mesh.as_ref().is_some_and(|m| m.texture.is_some()),
+        points: points.len(),
+        levels: layer.levels.len(),
+    })
+}
+
+/// Writes `root/variants.usda` over the variant folders in `dirs` that hold
+/// a `variant.usda`; the first is the default selection. The asset prim is
+/// named after the exemplar.
+pub fn write_asset(root: &Path, dirs: &[PathBuf], exemplar: &str, up: crate::level::Up, meters_per_unit: f64) -> Result<PathBuf> {
+    let variants: Vec<(String, String)> = dirs
+        .iter()
+        .filter(|d| d.join(VARIANT_USD).is_file())
+        .filter_map(|d| {
+            let rel = d.strip_prefix(root).ok()?;
+            let name = d.file_name()?.to_string_lossy().into_owned();
+            Some((name, format!("./{}/{VARIANT_USD}", rel.to_string_lossy())))
+        })
+        .collect();
+    let Some((default, _)) = variants.first() else {
+        return Err(Error::file(root, "no variant folder holds a variant.usda: nothing for the USD asset to select"));
+    };
+    let text = usd::asset_layer(exemplar, &variants, &usd::identifier(default), &metadata(up, meters_per_unit, exemplar));
+    let path = root.join(ASSET_USD);
+    crate::util::fs::write_file(&path, text)?;
+    Ok(path)
+}
+
+/// What the USD step wrote.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct UsdOutcome {
+    pub asset: PathBuf,
+    pub variants: Vec<VariantUsd>,
+}
+
+/// The USD step over the finished variant folders in `dirs`: each one's
+/// `variant.usda` (reused when its levels, its mesh and `meters_per_unit`
+/// are those it was written from), then `root/variants.usda`.
+pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit: f64) -> Result<UsdOutcome> {
+    let mut variants = Vec::new();
+    // The up axis every level of a run shares: from a coarsest level (small).
+    let up = dirs
+        .iter()
+        .find_map(|d| crate::eval::evaluate::level_files(d).ok())
+        .and_then(|files| vdb::read_level(&files[0].1).ok())
+        .map(|(l, _)| l.frame.up)
+        .unwrap_or_default();
+    for dir in dirs {
+        crate::util::interrupt::check()?;
+        let t = std::time::Instant::now();
+        let Some(sampled) = super::read_stamp(dir, "sample") else {
+            log::warn!("{}: its sampling did not finish: not in the USD asset", dir.display());
+            continue;
+        };
+        let meshed = super::read_stamp(dir, "mesh").map(|s| s.digest).unwrap_or_default();
+        let d = super::digest(&[&sampled.digest, &meshed, &meters_per_unit.to_string(), exemplar]);
+        if super::is_done(dir, "usd", &d) && dir.join(VARIANT_USD).is_file() {
+            // Reused: its summary is what the layer holds (read cheaply from the stamp's files).
+            variants.push(VariantUsd { path: dir.join(VARIANT_USD), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 });
+            continue;
+        }
+        match write_variant(dir, meters_per_unit, exemplar) {
+            Ok(v) => {
+                super::mark_done(dir, "usd", &d, t.elapsed().as_secs_f64())?;
+                variants.push(v);
+            }
+            Err(e) => {
+                // Not in the asset, and no layer from an earlier run beside it.
+                let _ = std::fs::remove_file(dir.join(VARIANT_USD));
+                log::warn!("no USD layer: {e}");
+            }
+        }
+    }
+    let asset = write_asset(root, dirs, exemplar, up, meters_per_unit)?;
+    Ok(UsdOutcome { asset, variants })
+}
