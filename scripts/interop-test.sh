@@ -8,6 +8,11 @@
 # - Blender (headless): imports every level file as a volume object (grid
 #   names and types, bounds on top of the exemplar mesh), and every mesh we
 #   write (.ply and .glb, vertex colours present);
+# - Pixar's usd-core (PyPI, its own virtual environment): opens the run's
+#   variants.usda, selects every variant, checks prim types, counts against
+#   the mesh and level files, asset paths, UsdUtils.ComplianceChecker;
+#   Blender imports it with its USD importer (scripts/interop/usd_check.py,
+#   blender_usd.py);
 # - Chromium (headless): opens report.html, every image decodes; a screenshot;
 # - exemplars written by Open3D, laspy (+lazrs), pye57 and Blender's glTF
 #   exporter read and encoded (scripts/interop-inputs.sh).
@@ -36,7 +41,9 @@ trap 'rm -rf "$WORK"' EXIT
 mkdir -p "$OUT"
 
 # A small but complete run: the demo exemplar through 32^3, two variants,
-# each meshed as mesh.ply decimated to 3000 triangles and mesh.glb.
+# each meshed as mesh.ply decimated to 3000 triangles, baked into a texture
+# (mesh.obj + mesh.mtl + mesh_basecolor.png, a textured mesh.glb), and its USD
+# layers.
 "$ROOT/target/release/examples/demo_exemplar" --out "$WORK/mesh" > /dev/null
 MESH=$WORK/mesh/demo_tower.ply
 "$BIN" -q run "$MESH" -o "$WORK/run" -n 2 --seed 1 \
@@ -48,7 +55,7 @@ POINTS=$(find "$WORK/run" -name 'level_*.points.vdb' | sort)
 # Meshes: the exemplar's finest level (32^3) meshed as PLY and glTF binary.
 "$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.ply" > /dev/null
 "$BIN" -q mesh "$WORK/run/exemplar/level_1.vdb" -o "$WORK/exemplar_level_1.glb" > /dev/null
-MESHES=$(ls "$WORK"/exemplar_level_1.ply "$WORK"/exemplar_level_1.glb; find "$WORK/run/variants" -name 'mesh.*' ! -name '*.png' | sort)
+MESHES=$(ls "$WORK"/exemplar_level_1.ply "$WORK"/exemplar_level_1.glb; find "$WORK/run/variants" -name 'mesh.*' ! -name '*.png' ! -name '*.mtl' | sort)
 "$BIN" info --json "$MESH" > "$WORK/mesh_info.json"
 echo "interop: $(wc -w <<< "$LEVELS") level files, $(wc -w <<< "$POINTS") points files, $(wc -w <<< "$MESHES") meshes"
 
@@ -70,6 +77,55 @@ vdb_print "$(echo "$LEVELS" | tail -1)" | sed 's/^/  vdb_print: /'
 blender -b --factory-startup --python-exit-code 1 --python "$ROOT/scripts/interop/blender_check.py" -- \
   "$WORK/mesh_info.json" $LEVELS -- $MESHES 2> "$WORK/blender.err" | grep '^interop' || {
   echo "interop: Blender check failed:" >&2; tail -20 "$WORK/blender.err" >&2; exit 1; }
+
+# --- USD: Pixar's usd-core and Blender's USD importer ----------------------------
+# usd-core from PyPI in a virtual environment of its own in the cache folder
+# (a second run reuses it).
+CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
+USD_VENV="$CACHE/usd-venv"
+if [ ! -f "$USD_VENV/.complete" ]; then
+  echo "interop: installing usd-core into $USD_VENV" >&2
+  rm -rf "$USD_VENV"
+  /usr/bin/python3 -m venv "$USD_VENV"
+  "$USD_VENV/bin/pip" install -q "usd-core==26.11"
+  touch "$USD_VENV/.complete"
+fi
+[ -s "$WORK/run/variants.usda" ] || { echo "interop: the run wrote no variants.usda" >&2; exit 1; }
+# Surface voxels of each variant's finest level, counted by pyopenvdb (not by us).
+/usr/bin/python3 - "$WORK/run" > "$WORK/usd_counts.json" <<'PY'
+import json, os, sys
+import pyopenvdb
+run = sys.argv[1]
+counts = {}
+for v in sorted(os.listdir(os.path.join(run, "variants"))):
+    d = os.path.join(run, "variants", v)
+    levels = sorted((int(f[6:-4]), f) for f in os.listdir(d)
+                    if f.startswith("level_") and f.endswith(".vdb") and not f.endswith(".points.vdb"))
+    grid = pyopenvdb.read(os.path.join(d, levels[-1][1]), "mask")
+    counts[v] = sum(1 for item in grid.citerOnValues() if item.value > 0)
+print(json.dumps(counts))
+PY
+"$USD_VENV/bin/python" "$ROOT/scripts/interop/usd_check.py" "$WORK/run" "$WORK/usd_counts.json"
+# Blender imports the asset (the default variant) with its own USD importer.
+DEFAULT_DIR="$WORK/run/variants/variant_000"
+if [ -f "$DEFAULT_DIR/mesh_basecolor.png" ]; then TRIANGLES=$(grep -c '^f ' "$DEFAULT_DIR/mesh.obj");
+else TRIANGLES=$(sed -n 's/^element face \([0-9]*\).*/\1/p' "$DEFAULT_DIR/mesh.ply" | head -1); fi
+blender -b --factory-startup --python-exit-code 1 --python "$ROOT/scripts/interop/blender_usd.py" -- \
+  "$WORK/run/variants.usda" "$TRIANGLES" "$OUT/usd_blender.png" 2> "$WORK/blender_usd.err" | grep '^interop' || {
+  echo "interop: Blender's USD import failed:" >&2; tail -20 "$WORK/blender_usd.err" >&2; exit 1; }
+# The asset's tree, as usd-core lists it.
+"$USD_VENV/bin/python" -c "
+import sys
+from pxr import Usd
+stage = Usd.Stage.Open(sys.argv[1])
+for prim in stage.Traverse():
+    depth = len(prim.GetPath().pathString.split('/')) - 2
+    sets = prim.GetVariantSets()
+    extra = ''.join(f' {{{n} = {sets.GetVariantSet(n).GetVariantSelection()} of {len(sets.GetVariantSet(n).GetVariantNames())}}}' for n in sets.GetNames())
+    print('  ' * depth + f'{prim.GetName()} ({prim.GetTypeName()}){extra}')
+" "$WORK/run/variants.usda" > "$OUT/usd_tree.txt"
+echo "interop: the asset's tree as usd-core composes it ($OUT/usd_tree.txt):"
+sed 's/^/  usd: /' "$OUT/usd_tree.txt"
 
 # --- report.html in a real browser ----------------------------------------------
 REPORT=$WORK/run/report.html

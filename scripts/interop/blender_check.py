@@ -1,12 +1,13 @@
 """Blender (headless) on the files we write.
 
 Usage: blender -b --factory-startup --python-exit-code 1 --python blender_check.py --
-       MESH_INFO.json LEVEL.vdb... -- MESH.(ply|glb)...
+       MESH_INFO.json LEVEL.vdb... -- MESH.(ply|glb|obj)...
 Every level file is imported as a volume object: grids mask, density (FLOAT),
 P, N, Cd (VECTOR_FLOAT), bounds on top of the exemplar (MESH_INFO.json is
 `shapeshifter info --json` of the exemplar mesh). Every mesh is imported with
 Blender's own importers and must carry vertex colours and sit on top of the
-exemplar too."""
+exemplar too; a baked light mesh (mesh.obj, and the mesh.glb beside a
+mesh_basecolor.png) must carry a loaded base-colour texture and UVs instead."""
 import json
 import os
 import sys
@@ -72,6 +73,8 @@ for path in meshes:
     before = set(bpy.data.objects)
     if path.endswith(".glb"):
         bpy.ops.import_scene.gltf(filepath=path)
+    elif path.endswith(".obj"):
+        bpy.ops.import_scene.obj(filepath=path)
     else:
         bpy.ops.import_mesh.ply(filepath=path)
     new = [o for o in bpy.data.objects if o not in before and o.type == "MESH"]
@@ -81,17 +84,29 @@ for path in meshes:
     me = obj.data
     if len(me.polygons) == 0:
         fail(f"{path}: no faces")
-    if len(me.color_attributes) == 0:
+    # A baked mesh (mesh.obj, and mesh.glb beside a texture) carries its
+    # colour as an image texture of its material, which must have loaded.
+    images = [n.image for slot in obj.material_slots if slot.material and slot.material.use_nodes
+              for n in slot.material.node_tree.nodes if n.type == "TEX_IMAGE" and n.image is not None]
+    textured = path.endswith(".obj") or os.path.isfile(os.path.join(os.path.dirname(path), "mesh_basecolor.png"))
+    if textured:
+        if not images or images[0].size[0] == 0 or not me.uv_layers:
+            fail(f"{path}: no loaded base-colour texture or no UVs after import")
+    elif len(me.color_attributes) == 0:
         fail(f"{path}: no vertex colours after import")
     bpy.context.view_layer.update()
     a, b = world_bounds(obj)
-    if path.endswith(".glb"):
+    if path.endswith(".glb") or path.endswith(".obj"):
         # glTF is +Y up; Blender's importer turns it to +Z up: (x, y, z) -> (x, -z, y).
         a, b = Vector((a.x, b.z, -b.y)), Vector((b.x, a.z, -a.y))
         a, b = Vector([min(a[i], b[i]) for i in range(3)]), Vector([max(a[i], b[i]) for i in range(3)])
     on_top(path, a, b, 0.05 * size)
-    attr = me.color_attributes[0]
     shown = os.path.join(os.path.basename(os.path.dirname(path)), os.path.basename(path))
+    if textured:
+        colour = f"texture {images[0].size[0]}x{images[0].size[1]} on UV map '{me.uv_layers[0].name}'"
+    else:
+        attr = me.color_attributes[0]
+        colour = f"colours '{attr.name}' ({attr.domain.lower()})"
     print(f"interop: blender: {shown}: {len(me.vertices)} vertices, {len(me.polygons)} faces, "
-          f"colours '{attr.name}' ({attr.domain.lower()}), on the exemplar's bounds")
-print(f"interop: blender: all {len(meshes)} meshes import with vertex colours")
+          f"{colour}, on the exemplar's bounds")
+print(f"interop: blender: all {len(meshes)} meshes import with their colours (vertex colours or baked texture)")

@@ -143,7 +143,14 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
             log::warn!("{}: its sampling did not finish: not in the USD asset", dir.display());
             continue;
         };
-        let meshed = super::read_stamp(dir, "mesh").map(|s| s.digest).unwrap_or_default();
+        // The mesh stamp's digest names the mesh's inputs, its time names
+        // this very mesh (a mesh made again from the same inputs by another
+        // program version is a new file the layer must be read from).
+        let mesh_stamp = super::stamp_path(dir, "mesh");
+        let meshed = match (super::read_stamp(dir, "mesh"), std::fs::metadata(&mesh_stamp).and_then(|m| m.modified())) {
+            (Some(s), Ok(t)) => format!("{} {:?}", s.digest, t),
+            _ => String::new(),
+        };
         let d = super::digest(&[&sampled.digest, &meshed, &meters_per_unit.to_string(), exemplar]);
         if super::is_done(dir, "usd", &d) && dir.join(VARIANT_USD).is_file() {
             // Reused: its summary is what the layer holds (read cheaply from the stamp's files).

@@ -74,7 +74,13 @@ pub fn bake_texture(mesh: &Mesh, points: &OrientedPoints, size: u32) -> Result<(
         packing: uvunwrap::Packing::Fast,
         ..Default::default()
     };
-    let atlas = uvunwrap::generate(&[uvunwrap::MeshInput::new(&positions, &indices)], &options)
+    // A panic inside the unwrapper (a dependency's bug on some mesh) is this
+    // mesh's error, not the end of the stage: the caller keeps vertex colours.
+    let atlas = std::panic::catch_unwind(|| uvunwrap::generate(&[uvunwrap::MeshInput::new(&positions, &indices)], &options))
+        .map_err(|p| {
+            let why = p.downcast_ref::<String>().cloned().or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()));
+            Error::Invalid(format!("UV atlas: the unwrapper failed ({})", why.unwrap_or_else(|| "panic".into())))
+        })?
         .map_err(|e| Error::Invalid(format!("UV atlas: {e}")))?;
     if atlas.page_count != 1 {
         return Err(Error::Invalid(format!(
