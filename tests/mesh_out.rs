@@ -226,15 +226,82 @@ fn mesh_stage_writes_light_ply_and_glb_as_configured() {
     let level = hostile::sphere_level(2000);
     write_level(&variant.join("level_1.vdb"), &level, &Provenance::default(), WriteOptions::default()).unwrap();
     let dirs = [variant.clone()];
-    let both = MeshConfig { faces: 600, glb: true };
+    let both = MeshConfig { faces: 600, glb: true, texture: 0 };
     assert_eq!(shapeshifter::pipeline::mesh_stage(&dirs, false, 64, &both).unwrap(), 1);
     let ply = mesh::load(&variant.join("mesh.ply")).unwrap();
     assert!(ply.triangles.len() <= 600 && ply.triangles.len() >= 550, "{}", ply.triangles.len());
     let glb = std::fs::read(variant.join("mesh.glb")).unwrap();
     assert!(gltf::Gltf::from_slice(&glb).is_ok());
     // Settings changed: meshed again, and no mesh.glb left from before.
-    let ply_only = MeshConfig { faces: 0, glb: false };
+    let ply_only = MeshConfig { faces: 0, glb: false, texture: 0 };
     assert_eq!(shapeshifter::pipeline::mesh_stage(&dirs, false, 64, &ply_only).unwrap(), 1);
     assert!(!variant.join("mesh.glb").exists());
     assert!(mesh::load(&variant.join("mesh.ply")).unwrap().triangles.len() > 600);
+}
+
+#[test]
+fn a_light_mesh_is_baked_into_a_texture_and_its_usd_layer_counts_as_its_files() {
+    use shapeshifter::io::vdb::{write_level, Provenance, WriteOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let variant = dir.path().join("variants/variant_000");
+    std::fs::create_dir_all(&variant).unwrap();
+    let mut level = hostile::sphere_level(2000);
+    // Two colours by hemisphere, so the texture has something to carry.
+    for i in 0..level.len() {
+        level.colours[i] = if level.coords[i].x >= level.resolution as i32 / 2 { glam::Vec3::X } else { glam::Vec3::Z };
+    }
+    write_level(&variant.join("level_1.vdb"), &level, &Provenance::default(), WriteOptions::default()).unwrap();
+    let dirs = [variant.clone()];
+    let baked = MeshConfig { faces: 600, glb: false, texture: 256 };
+    assert_eq!(shapeshifter::pipeline::mesh_stage(&dirs, false, 64, &baked).unwrap(), 1);
+    for f in ["mesh.ply", "mesh.obj", "mesh.mtl", "mesh_basecolor.png", "mesh.glb"] {
+        assert!(variant.join(f).is_file(), "{f} missing");
+    }
+    let obj = mesh::load(&variant.join("mesh.obj")).unwrap();
+    let ply = mesh::load(&variant.join("mesh.ply")).unwrap();
+    assert_eq!(obj.triangles.len(), ply.triangles.len(), "one mesh, two files");
+    let tex = obj.texture.as_ref().expect("the OBJ names its texture");
+    assert_eq!(tex.uvs.len(), 3 * obj.triangles.len());
+    // The texture holds both hemispheres' colours (red and blue texels).
+    let (mut red, mut blue) = (0, 0);
+    for p in tex.image.pixels() {
+        red += usize::from(p[0] > 200 && p[2] < 60);
+        blue += usize::from(p[2] > 200 && p[0] < 60);
+    }
+    assert!(red > 100 && blue > 100, "red {red}, blue {blue} texels");
+    // The GLB: baseColorTexture through TEXCOORD_0, no COLOR_0 to darken it.
+    let doc = gltf::Gltf::from_slice(&std::fs::read(variant.join("mesh.glb")).unwrap()).unwrap();
+    let prim = doc.meshes().next().unwrap().primitives().next().unwrap();
+    assert!(prim.get(&gltf::Semantic::TexCoords(0)).is_some());
+    assert!(prim.get(&gltf::Semantic::Colors(0)).is_none());
+    let info = prim.material().pbr_metallic_roughness().base_color_texture().expect("baseColorTexture");
+    assert!(matches!(info.texture().source().source(), gltf::image::Source::View { mime_type: "image/png", .. }));
+    // And our own reader reads it back textured, as it reads other glTF files.
+    let back = mesh::load(&variant.join("mesh.glb")).unwrap();
+    assert_eq!(back.triangles.len(), obj.triangles.len());
+    assert_eq!(back.texture.as_ref().map(|t| (t.image.width(), t.image.height())), Some((tex.image.width(), tex.image.height())));
+
+    // The USD step: a variant layer whose counts are the OBJ's, and the asset.
+    std::fs::write(variant.join("stage_sample.json"), r#"{"digest":"d","seconds":0.0}"#).unwrap();
+    let outcome = shapeshifter::pipeline::usd::usd_stage(dir.path(), &dirs, "sphere", 1.0).unwrap();
+    assert_eq!(outcome.variants.len(), 1);
+    let v = &outcome.variants[0];
+    assert!(v.textured);
+    assert_eq!(v.triangles, obj.triangles.len());
+    assert_eq!(v.points, shapeshifter::geom::points::OrientedPoints::from_level(&level).len());
+    let layer = std::fs::read_to_string(variant.join("variant.usda")).unwrap();
+    let counts = layer.split("int[] faceVertexCounts = [").nth(1).unwrap().split(']').next().unwrap();
+    assert_eq!(counts.split(',').count(), obj.triangles.len());
+    assert!(layer.contains("asset inputs:file = @./mesh_basecolor.png@"));
+    assert!(layer.contains("asset filePath = @./level_1.vdb@"));
+    let asset = std::fs::read_to_string(dir.path().join("variants.usda")).unwrap();
+    assert!(asset.contains("prepend references = @./variants/variant_000/variant.usda@"));
+    assert!(asset.contains("defaultPrim = \"sphere\""));
+
+    // Texture off: meshed again, no baked file left from before.
+    let plain = MeshConfig { faces: 600, glb: false, texture: 0 };
+    assert_eq!(shapeshifter::pipeline::mesh_stage(&dirs, false, 64, &plain).unwrap(), 1);
+    for f in ["mesh.obj", "mesh.mtl", "mesh_basecolor.png", "mesh.glb"] {
+        assert!(!variant.join(f).exists(), "{f} left from the baked mesh");
+    }
 }
