@@ -130,6 +130,7 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     ];
     let mut args = vec!["run", good.to_str().unwrap(), corrupt.to_str().unwrap(), aborted.to_str().unwrap(), good2.to_str().unwrap(), "-o", out.to_str().unwrap(), "-n", "1"];
     args.extend(tiny);
+    args.push("--json");
     let o = shapeshifter(&args);
     assert!(!o.status.success(), "a failed input must fail the batch");
     let err = stderr(&o);
@@ -145,6 +146,26 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     }
     assert!(!out.join("corrupt").join("eval.json").exists());
     assert!(!out.join("aborted").join("eval.json").exists());
+    // --json: one record per exemplar (JSON Lines), in order, failures included.
+    let records: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).expect("one JSON record per line")).collect();
+    let status: Vec<(&str, i64)> = records.iter().map(|r| (r["status"].as_str().unwrap(), r["exit_status"].as_i64().unwrap())).collect();
+    assert_eq!(status, [("done", 0), ("failed", 1), ("failed", 1), ("done", 0)]);
+    assert!(records[1]["error"].as_str().unwrap().contains("corrupt.obj"));
+    for r in [&records[0], &records[3]] {
+        let files = r["files"].as_array().unwrap();
+        let kind = |k: &str| files.iter().filter(|f| f["kind"] == k).count();
+        assert!(kind("level_volume") >= 4 && kind("level_points") >= 4 && kind("mesh") >= 1 && kind("eval") == 1, "{r}");
+        assert!(kind("usd") == 2 && kind("report") == 1 && kind("preview") >= 3, "{r}");
+        assert!(files.iter().all(|f| Path::new(f["path"].as_str().unwrap()).is_file()), "every listed file exists");
+        assert!(files.iter().any(|f| f["kind"] == "level_volume" && f["variant"] == "variant_000" && f["level"] == 1));
+        let stages: Vec<&str> = r["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
+        assert_eq!(stages, ["encode", "train", "sample", "mesh", "usd", "evaluate"]);
+    }
+    // A bad --set is bad usage: 2, one line, nothing run.
+    let o = shapeshifter(&["run", good.to_str().unwrap(), "-o", dir.path().join("bad").to_str().unwrap(), "--set", "mesh.nope=1"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(!dir.path().join("bad").exists());
 }
 
 #[test]

@@ -88,7 +88,7 @@ for path in meshes:
     # colour as an image texture of its material, which must have loaded.
     images = [n.image for slot in obj.material_slots if slot.material and slot.material.use_nodes
               for n in slot.material.node_tree.nodes if n.type == "TEX_IMAGE" and n.image is not None]
-    textured = path.endswith(".obj") or os.path.isfile(os.path.join(os.path.dirname(path), "mesh_basecolor.png"))
+    textured = path.endswith(".obj") or (path.endswith(".glb") and os.path.isfile(os.path.join(os.path.dirname(path), "mesh_basecolor.png")))
     if textured:
         if not images or images[0].size[0] == 0 or not me.uv_layers:
             fail(f"{path}: no loaded base-colour texture or no UVs after import")

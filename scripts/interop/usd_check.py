@@ -16,13 +16,14 @@ failure:
   with OpenVDBAsset fields whose file paths resolve to existing files;
 - a textured mesh: primvars:st faceVarying (one UV per corner), a bound
   UsdPreviewSurface whose UsdUVTexture file resolves;
-- UsdUtils.ComplianceChecker on the asset and on one variant layer: no errors.
+- usd-core's validators (UsdValidation, what usdchecker runs) on the asset
+  with each variant selected, and on one variant layer: no errors.
 """
 import json
 import os
 import sys
 
-from pxr import Sdf, Usd, UsdGeom, UsdShade, UsdUtils, UsdVol
+from pxr import Usd, UsdGeom, UsdShade, UsdVol
 
 
 def fail(msg):
@@ -153,15 +154,30 @@ def main():
           f"UsdPreviewSurface + UsdUVTexture resolving), Points one per surface voxel, Volume with one `level` "
           f"variant per level_K.vdb and OpenVDBAsset paths resolving")
 
-    for path in [asset, os.path.join(run, "variants", folders[0], "variant.usda")]:
-        checker = UsdUtils.ComplianceChecker(rootPackageOnly=False, skipVariants=False, verbose=False)
-        checker.CheckCompliance(path)
-        errors, failed = checker.GetErrors(), checker.GetFailedChecks()
-        if errors or failed:
-            fail(f"ComplianceChecker on {path}: {errors + failed}")
-        warnings = checker.GetWarnings()
-        print(f"interop: UsdUtils.ComplianceChecker: {os.path.relpath(path, run)}: no errors, no failed checks"
-              + (f", {len(warnings)} warnings: {warnings}" if warnings else ", no warnings"))
+    # usd-core's validators (what usdchecker runs; 26.x replaced
+    # UsdUtils.ComplianceChecker with the UsdValidation framework), on the
+    # asset with every variant selected in turn and on one variant layer.
+    from pxr import UsdValidation
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    context = UsdValidation.ValidationContext(validators)
+    def validate(stage, what):
+        found = context.Validate(stage)
+        errors = [e for e in found if e.GetType() == UsdValidation.ValidationErrorType.Error]
+        warnings = [e for e in found if e.GetType() == UsdValidation.ValidationErrorType.Warn]
+        if errors:
+            fail(f"UsdValidation on {what}: " + "; ".join(f"{e.GetName()}: {e.GetMessage()}" for e in errors))
+        return warnings
+    warned = []
+    for name in names:
+        vset.SetVariantSelection(name)
+        warned += validate(stage, f"variants.usda ({name})")
+    vset.ClearVariantSelection()
+    layer_path = os.path.join(run, "variants", folders[0], "variant.usda")
+    warned += validate(Usd.Stage.Open(layer_path), os.path.relpath(layer_path, run))
+    distinct = sorted({f"{e.GetName()}: {e.GetMessage()}" for e in warned})
+    print(f"interop: usd-core's {len(validators)} validators (UsdValidation, as usdchecker): variants.usda with each "
+          f"variant selected and {os.path.relpath(layer_path, run)}: no errors"
+          + (f", warnings: {distinct}" if distinct else ", no warnings"))
 
 
 if __name__ == "__main__":
