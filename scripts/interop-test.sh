@@ -11,8 +11,8 @@
 # - Pixar's usd-core (PyPI, its own virtual environment): opens the run's
 #   variants.usda, selects every variant, checks prim types, counts against
 #   the mesh and level files, asset paths, UsdUtils.ComplianceChecker;
-#   Blender imports it with its USD importer (scripts/interop/usd_check.py,
-#   blender_usd.py);
+#   Blender 4.2 (PyPI's bpy module: Debian's Blender has no USD) imports it
+#   with its USD importer (scripts/interop/usd_check.py, blender_usd.py);
 # - Chromium (headless): opens report.html, every image decodes; a screenshot;
 # - exemplars written by Open3D, laspy (+lazrs), pye57 and Blender's glTF
 #   exporter read and encoded (scripts/interop-inputs.sh).
@@ -110,9 +110,20 @@ PY
 DEFAULT_DIR="$WORK/run/variants/variant_000"
 if [ -f "$DEFAULT_DIR/mesh_basecolor.png" ]; then TRIANGLES=$(grep -c '^f ' "$DEFAULT_DIR/mesh.obj");
 else TRIANGLES=$(sed -n 's/^element face \([0-9]*\).*/\1/p' "$DEFAULT_DIR/mesh.ply" | head -1); fi
-blender -b --factory-startup --python-exit-code 1 --python "$ROOT/scripts/interop/blender_usd.py" -- \
-  "$WORK/run/variants.usda" "$TRIANGLES" "$OUT/usd_blender.png" 2> "$WORK/blender_usd.err" | grep '^interop' || {
-  echo "interop: Blender's USD import failed:" >&2; tail -20 "$WORK/blender_usd.err" >&2; exit 1; }
+# Debian 12's Blender 3.4 is built without USD: Blender as a Python module
+# (PyPI's bpy 4.2) in a virtual environment of its own.
+BPY_VENV="$CACHE/bpy-venv"
+if [ ! -f "$BPY_VENV/.complete" ]; then
+  echo "interop: installing Blender's bpy module into $BPY_VENV" >&2
+  rm -rf "$BPY_VENV"
+  /usr/bin/python3 -m venv "$BPY_VENV"
+  "$BPY_VENV/bin/pip" install -q "bpy==4.2.0"
+  touch "$BPY_VENV/.complete"
+fi
+"$BPY_VENV/bin/python" "$ROOT/scripts/interop/blender_usd.py" \
+  "$WORK/run/variants.usda" "$TRIANGLES" "$OUT/usd_blender.png" > "$WORK/blender_usd.out" 2>&1 || {
+  echo "interop: Blender's USD import failed:" >&2; tail -20 "$WORK/blender_usd.out" >&2; exit 1; }
+grep '^interop' "$WORK/blender_usd.out"
 # The asset's tree, as usd-core lists it.
 "$USD_VENV/bin/python" -c "
 import sys

@@ -1,7 +1,9 @@
-"""Blender (headless) imports a run's USD asset with its own USD importer.
+"""Blender imports a run's USD asset with its own USD importer.
 
-Usage: blender -b --factory-startup --python-exit-code 1 --python blender_usd.py --
-       RUN/variants.usda TRIANGLES [OUT.png]
+Usage: python blender_usd.py RUN/variants.usda TRIANGLES [OUT.png]
+with Blender as a Python module (PyPI's `bpy`, in its own virtual
+environment: Debian 12's Blender 3.4 is built without USD support, its
+`wm.usd_import` operator does not exist).
 
 The default variant's mesh must arrive as a mesh object with TRIANGLES faces
 (the default variant's mesh file), with a colour attribute (displayColor) or,
@@ -15,7 +17,7 @@ import sys
 import bpy
 import mathutils
 
-args = sys.argv[sys.argv.index("--") + 1:]
+args = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
 usd, triangles = args[0], int(args[1])
 out = args[2] if len(args) > 2 else None
 
@@ -26,7 +28,7 @@ def fail(msg):
 
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
-result = bpy.ops.wm.usd_import(filepath=usd, import_volumes=False, import_points=False)
+result = bpy.ops.wm.usd_import(filepath=usd)
 if "FINISHED" not in result:
     fail(f"usd_import returned {result}")
 meshes = [o for o in bpy.context.scene.objects if o.type == "MESH"]
@@ -55,6 +57,11 @@ if out:
     for o in list(scene.objects):
         if o is not ob:
             bpy.data.objects.remove(o)
+    # Blender's importer keeps a Y-up stage's coordinates: stood up for the
+    # picture (Blender is Z-up), as its glTF importer would.
+    if "upAxis = \"Y\"" in open(usd).read(4096):
+        ob.rotation_euler[0] = math.pi / 2
+    scene.view_settings.view_transform = "Standard"
     if not images:
         # Vertex colours as the base colour (Blender's importer makes none).
         mat = bpy.data.materials.new("displayColor")
