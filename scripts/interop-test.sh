@@ -82,14 +82,19 @@ blender -b --factory-startup --python-exit-code 1 --python "$ROOT/scripts/intero
 # usd-core from PyPI in a virtual environment of its own in the cache folder
 # (a second run reuses it).
 CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
+# venv DIR PACKAGE...: a virtual environment holding PACKAGE..., made once.
+venv() {
+  local dir=$1; shift
+  if [ ! -f "$dir/.complete" ]; then
+    echo "interop: installing $* into $dir" >&2
+    rm -rf "$dir"
+    /usr/bin/python3 -m venv "$dir"
+    "$dir/bin/pip" install -q "$@"
+    touch "$dir/.complete"
+  fi
+}
 USD_VENV="$CACHE/usd-venv"
-if [ ! -f "$USD_VENV/.complete" ]; then
-  echo "interop: installing usd-core into $USD_VENV" >&2
-  rm -rf "$USD_VENV"
-  /usr/bin/python3 -m venv "$USD_VENV"
-  "$USD_VENV/bin/pip" install -q "usd-core==26.11"
-  touch "$USD_VENV/.complete"
-fi
+venv "$USD_VENV" "usd-core==26.11"
 [ -s "$WORK/run/variants.usda" ] || { echo "interop: the run wrote no variants.usda" >&2; exit 1; }
 # Surface voxels of each variant's finest level, counted by pyopenvdb (not by us).
 /usr/bin/python3 - "$WORK/run" > "$WORK/usd_counts.json" <<'PY'
@@ -113,13 +118,7 @@ else TRIANGLES=$(sed -n 's/^element face \([0-9]*\).*/\1/p' "$DEFAULT_DIR/mesh.p
 # Debian 12's Blender 3.4 is built without USD: Blender as a Python module
 # (PyPI's bpy 4.2) in a virtual environment of its own.
 BPY_VENV="$CACHE/bpy-venv"
-if [ ! -f "$BPY_VENV/.complete" ]; then
-  echo "interop: installing Blender's bpy module into $BPY_VENV" >&2
-  rm -rf "$BPY_VENV"
-  /usr/bin/python3 -m venv "$BPY_VENV"
-  "$BPY_VENV/bin/pip" install -q "bpy==4.2.0"
-  touch "$BPY_VENV/.complete"
-fi
+venv "$BPY_VENV" "bpy==4.2.0"
 "$BPY_VENV/bin/python" "$ROOT/scripts/interop/blender_usd.py" \
   "$WORK/run/variants.usda" "$TRIANGLES" "$OUT/usd_blender.png" > "$WORK/blender_usd.out" 2>&1 || {
   echo "interop: Blender's USD import failed:" >&2; tail -20 "$WORK/blender_usd.out" >&2; exit 1; }
