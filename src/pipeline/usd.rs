@@ -157,17 +157,17 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
             variants.push(VariantUsd { path: dir.join(VARIANT_USD), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 });
             continue;
         }
-        match write_variant(dir, meters_per_unit, exemplar) {
-            Ok(v) => {
-                super::mark_done(dir, "usd", &d, t.elapsed().as_secs_f64())?;
-                variants.push(v);
-            }
-            Err(e) => {
-                // Not in the asset, and no layer from an earlier run beside it.
-                let _ = std::fs::remove_file(dir.join(VARIANT_USD));
-                log::warn!("no USD layer: {e}");
-            }
+        // A variant pruned to nothing has no layer (a warning); any other
+        // failure (a full disk, an unreadable file) is the step's error.
+        let (_, finest) = super::finest_in(dir)?;
+        if !finest.mask.iter().any(|&m| m > 0.0) {
+            let _ = std::fs::remove_file(dir.join(VARIANT_USD));
+            log::warn!("{}: pruned to nothing: not in the USD asset", dir.display());
+            continue;
         }
+        let v = write_variant(dir, meters_per_unit, exemplar)?;
+        super::mark_done(dir, "usd", &d, t.elapsed().as_secs_f64())?;
+        variants.push(v);
     }
     let asset = write_asset(root, dirs, exemplar, up, meters_per_unit)?;
     Ok(UsdOutcome { asset, variants })
