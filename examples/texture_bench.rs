@@ -43,7 +43,10 @@ struct Args {
 }
 
 /// Area-uniform surface samples (position, colour) of a mesh; the same
-/// seeds for every mesh.
+/// seeds for every mesh. Not `Mesh::surface_samples`: that one gives every
+/// triangle at least one sample (right for distances between surfaces),
+/// which here would weigh sub-texel slivers far beyond the area a viewer
+/// sees of them.
 fn coloured_samples(mesh: &Mesh, n: usize) -> Vec<(Vec3, Vec3)> {
     let areas: Vec<f32> = mesh
         .triangles

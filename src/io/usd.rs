@@ -153,7 +153,8 @@ fn array<T: Sync>(items: &[T], fmt: impl Fn(&T) -> String + Sync) -> String {
     format!("[{body}]")
 }
 
-fn bounds_of(points: &[Vec3]) -> (Vec3, Vec3) {
+/// The bounding box of `points` (min, max).
+pub fn bounds_of(points: &[Vec3]) -> (Vec3, Vec3) {
     points.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)))
 }
 

@@ -35,15 +35,17 @@ pub fn metadata(up: crate::level::Up, meters_per_unit: f64, exemplar: &str) -> S
 /// Writes `dir/variant.usda` from the folder's files: the textured
 /// `mesh.obj` where there is one, else `mesh.ply`, else no mesh; the finest
 /// level's points; every `level_K.vdb` as a choice of the volume's `level`
-/// set. Errors: no level files, or a file that does not read.
-pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result<VariantUsd> {
+/// set. None (and no layer) for a variant whose finest level has no surface
+/// voxels (pruned to nothing). Errors: no level files, a file that does not
+/// read, the layer not written.
+pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result<Option<VariantUsd>> {
     let files = crate::eval::evaluate::level_files(dir)?;
     let mut levels = Vec::with_capacity(files.len());
     let mut finest = None;
     for (k, path) in &files {
         let (level, _) = vdb::read_level(path)?;
         let points = crate::geom::points::OrientedPoints::from_level(&level);
-        let (lo, hi) = points.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let (lo, hi) = usd::bounds_of(&points.positions);
         let half = Vec3::splat(points.spacing * 0.5);
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         levels.push(LevelVolume { index: *k, file: format!("./{name}"), bounds: (lo - half, hi + half) });
@@ -51,7 +53,8 @@ pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result
     }
     let (finest, mut points) = finest.expect("level_files returns at least one");
     if points.is_empty() {
-        return Err(Error::file(dir, "its finest level has no surface voxels (pruned to nothing)"));
+        let _ = std::fs::remove_file(dir.join(VARIANT_USD));
+        return Ok(None);
     }
     points.normals.iter_mut().for_each(|n| *n = n.normalize_or_zero());
 
@@ -75,7 +78,7 @@ pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result
     });
     let layer = VariantLayer {
         mesh: mesh_prim,
-        points: (!points.is_empty()).then(|| PointsPrim {
+        points: Some(PointsPrim {
             positions: &points.positions,
             normals: &points.normals,
             colours: &points.colours,
@@ -86,13 +89,13 @@ pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result
     let text = usd::variant_layer(&layer, &metadata(finest.frame.up, meters_per_unit, exemplar));
     let path = dir.join(VARIANT_USD);
     crate::util::fs::write_file(&path, text)?;
-    Ok(VariantUsd {
+    Ok(Some(VariantUsd {
         path,
         triangles: m.as_ref().map_or(0, |m| m.triangles.len()),
         textured: layer.mesh.as_ref().is_some_and(|m| m.texture.is_some()),
         points: points.len(),
         levels: layer.levels.len(),
-    })
+    }))
 }
 
 /// Writes `root/variants.usda` over the variant folders in `dirs` that hold
@@ -159,15 +162,13 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
         }
         // A variant pruned to nothing has no layer (a warning); any other
         // failure (a full disk, an unreadable file) is the step's error.
-        let (_, finest) = super::finest_in(dir)?;
-        if !finest.mask.iter().any(|&m| m > 0.0) {
-            let _ = std::fs::remove_file(dir.join(VARIANT_USD));
-            log::warn!("{}: pruned to nothing: not in the USD asset", dir.display());
-            continue;
+        match write_variant(dir, meters_per_unit, exemplar)? {
+            Some(v) => {
+                super::mark_done(dir, "usd", &d, t.elapsed().as_secs_f64())?;
+                variants.push(v);
+            }
+            None => log::warn!("{}: pruned to nothing: not in the USD asset", dir.display()),
         }
-        let v = write_variant(dir, meters_per_unit, exemplar)?;
-        super::mark_done(dir, "usd", &d, t.elapsed().as_secs_f64())?;
-        variants.push(v);
     }
     let asset = write_asset(root, dirs, exemplar, up, meters_per_unit)?;
     Ok(UsdOutcome { asset, variants })

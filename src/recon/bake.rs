@@ -122,6 +122,14 @@ pub fn bake_texture(mesh: &Mesh, points: &OrientedPoints, size: u32) -> Result<(
                     }
                 }
             }
+            // A sliver covering no texel centre still gets the texel under
+            // its centroid, with its own colour: else dilation would fill it
+            // from whichever chart lies next to it in the atlas.
+            if found.is_empty() {
+                let m = (a + b + c) / 3.0;
+                let (x, y) = ((m.x as u32).min(w - 1), (m.y as u32).min(h - 1));
+                found.push((y * w + x, (pa + pb + pc) / 3.0));
+            }
             found.into_iter()
         })
         .collect();
