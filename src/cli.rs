@@ -1204,8 +1204,12 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Usd { dir, meters_per_unit, json } => {
             let paths = pipeline::RunPaths::new(&dir);
-            let _lock = lock::lock(&dir, lock::Mode::Exclusive, cli.wait, "usd")?;
+            if !dir.is_dir() {
+                anyhow::bail!("{}: no such run folder", dir.display());
+            }
+            // A run folder first (its config), then its lock: nothing made in a wrong folder.
             let config = paths.read_config()?;
+            let _lock = lock::lock(&dir, lock::Mode::Exclusive, cli.wait, "usd")?;
             let mpu = meters_per_unit.unwrap_or(config.output.meters_per_unit);
             if !(mpu.is_finite() && mpu > 0.0) {
                 return Err(Usage(anyhow::anyhow!("--meters-per-unit {mpu}: expected a positive number")).into());

@@ -166,6 +166,14 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     let o = shapeshifter(&["run", good.to_str().unwrap(), "-o", dir.path().join("bad").to_str().unwrap(), "--set", "mesh.nope=1"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(!dir.path().join("bad").exists());
+    // `usd` on a folder that is not a run: one line, exit 1, nothing made there.
+    let missing = dir.path().join("missing");
+    let o = shapeshifter(&["usd", missing.to_str().unwrap()]);
+    assert_eq!((o.status.code(), stderr(&o).lines().filter(|l| l.starts_with("error")).count()), (Some(1), 1), "{}", stderr(&o));
+    assert!(!missing.exists());
+    let o = shapeshifter(&["usd", dir.path().to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(!dir.path().join(".shapeshifter.lock").exists() && !dir.path().join("variants.usda").exists());
 }
 
 #[test]
