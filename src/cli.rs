@@ -942,48 +942,46 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Train { dir, models, level, resume, jobs, setup } => {
             let config = load_config(setup.profile("cpu"), &setup.overrides)?;
             let device = device(&setup.device)?;
-            let (manifest, levels) = dataset::read(&dir)?;
-            let models = models.unwrap_or_else(|| dir.join("models"));
-            // Refused before anything is written (a level detail transfer makes, a resume of nothing).
-            pipeline::levels_to_run(&config, &levels, level)?;
-            if resume && !models.is_dir() {
-                anyhow::bail!("{}: --resume, but there is no models folder", models.display());
-            }
-            let _lock = lock::lock(&models, lock::Mode::Exclusive, cli.wait, "train")?;
-            pipeline::record_config(&models, &config)?;
-            let jobs = pipeline::run::auto_jobs(jobs, device, cli.threads);
-            if level.is_none() && jobs > 1 {
-                let todo = pipeline::levels_to_train(levels.len(), &manifest.source_sha256, &config, &models);
-                let exe = std::env::current_exe()?;
-                pipeline::train_in_processes(&models, &todo, &config, jobs, !quiet, |k| {
-                    let mut c = std::process::Command::new(&exe);
-                    c.args(["--threads", &cli.threads.max(1).to_string(), "train"])
-                        .arg(&dir)
-                        .arg("--models")
-                        .arg(&models)
-                        .args(["--level", &k.to_string(), "--profile", setup.profile("cpu"), "--device", &setup.device]);
-                    for o in &setup.overrides {
-                        c.args(["--set", o]);
+            let models = models.unwrap_or_else(|| dir.join(pipeline::layout::MODELS_DIR));
+            let exe = std::env::current_exe()?;
+            let trained = pipeline::train_folder(&pipeline::TrainFolder {
+                exemplar_dir: &dir,
+                models: &models,
+                config: &config,
+                device,
+                level,
+                resume,
+                jobs: pipeline::run::auto_jobs(jobs, device, cli.threads),
+                child: pipeline::TrainChild {
+                    exe: &exe,
+                    threads: cli.threads,
+                    profile: setup.profile("cpu"),
+                    device_spec: &setup.device,
+                    overrides: &setup.overrides,
+                },
+                progress: !quiet,
+                wait: cli.wait,
+            })?;
+            match trained {
+                pipeline::Trained::InProcesses { levels, jobs } => {
+                    println!("{} levels trained on {jobs} processes -> {}", levels.len(), models.display());
+                }
+                pipeline::Trained::InThisProcess(reports) => {
+                    for r in &reports {
+                        println!(
+                            "level {}: {} upsampler + {} diffusion steps, loss {:.4} -> {:.4}, {:.0} s{}",
+                            r.level, r.upsampler_steps, r.diffusion_steps, r.diffusion_loss_start, r.diffusion_loss_end, r.seconds,
+                            if r.finished { "" } else { " (not finished: run again to resume)" }
+                        );
                     }
-                    c
-                })?;
-                println!("{} levels trained on {jobs} processes -> {}", todo.len(), models.display());
-                return Ok(ExitCode::SUCCESS);
-            }
-            let reports = pipeline::train_stage(&levels, &manifest.source_sha256, &config, device, &models, level, !quiet)?;
-            for r in &reports {
-                println!(
-                    "level {}: {} upsampler + {} diffusion steps, loss {:.4} -> {:.4}, {:.0} s{}",
-                    r.level, r.upsampler_steps, r.diffusion_steps, r.diffusion_loss_start, r.diffusion_loss_end, r.seconds,
-                    if r.finished { "" } else { " (not finished: run again to resume)" }
-                );
+                }
             }
             Ok(ExitCode::SUCCESS)
         }
         Command::Sample { dir, output, models, n, first, seed, extent, stop_level, from, preview, overrides, device: dev, json } => {
             let t = std::time::Instant::now();
-            let models = models.unwrap_or_else(|| dir.join("models"));
-            let recorded = models.join("config.toml");
+            let models = models.unwrap_or_else(|| dir.join(pipeline::layout::MODELS_DIR));
+            let recorded = models.join(pipeline::layout::CONFIG);
             if !recorded.is_file() {
                 anyhow::bail!(
                     "{}: no trained models here (no config.toml): train first (`shapeshifter train {}`), or give --models",
@@ -992,44 +990,19 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 );
             }
             let config = Config::read(&recorded)?.with_overrides(&overrides).map_err(|e| Usage(e.into()))?;
+            let ext = edit::parse_vec3(&extent).ok_or_else(|| Usage(anyhow::anyhow!("--extent '{extent}': expected X,Y,Z")))?;
             let device = device(&dev)?;
-            let (manifest, levels) = dataset::read(&dir)?;
-            let ext = edit::parse_vec3(&extent).ok_or_else(|| anyhow::anyhow!("--extent '{extent}': expected X,Y,Z"))?;
-            let mut options = SampleOptions::from_config(&config, n, seed);
-            options.first = first;
-            options.extent = ext;
-            options.stop_level = stop_level;
+            let options = SampleOptions { first, extent: ext, stop_level, ..SampleOptions::from_config(&config, n, seed) };
             let _lock = lock::lock(&output, lock::Mode::Exclusive, cli.wait, "sample")?;
-            let from_level = from.as_deref().map(vdb::read_level).transpose()?.map(|(l, _)| l);
-            let m = sample::load_models(&models, &config, pipeline::models_needed(&config, &levels, stop_level), device)?;
-            let variants = pipeline::sample_variants(&m, &levels, &options, from_level)?;
-            // Nothing usable is a failure; some empty variants a warning.
-            let names: Vec<String> = (first..first + variants.len()).map(pipeline::variant_name).collect();
-            let resolutions: Vec<u32> = levels.iter().map(|l| l.resolution).collect();
-            pipeline::check_usable(&pipeline::empty_sampled(&variants, &names), variants.len(), &resolutions)?;
-            std::fs::create_dir_all(&output)?;
-            pipeline::record_config(&output, &config)?;
-            for (i, v) in variants.iter().enumerate() {
-                let provenance = vdb::Provenance {
-                    exemplar: manifest.exemplar.clone(),
-                    seed: Some(seed),
-                    config_digest: config.digest(),
-                    exemplar_open: manifest.open_surface,
-                    crs: manifest.crs.clone(),
-                };
-                dataset::write_variant(&pipeline::variant_dir(&output, first + i), v, &provenance, preview, config.output.write_options())?;
-            }
+            let dirs = pipeline::sample_into(&dir, &models, &output, &config, device, &options, from.as_deref(), preview)?;
             if json {
-                // The files of the variant folders this command wrote.
-                let files: Vec<_> = (first..first + variants.len())
-                    .flat_map(|i| pipeline::layout::output_files(&pipeline::variant_dir(&output, i)))
-                    .collect();
+                let files: Vec<_> = dirs.iter().flat_map(|d| pipeline::layout::output_files(d)).collect();
                 let record = serde_json::json!({
                     "models": models,
                     "output": output,
                     "status": "done",
                     "exit_status": 0,
-                    "variants": variants.len(),
+                    "variants": dirs.len(),
                     "first": first,
                     "seed": seed,
                     "seconds": t.elapsed().as_secs_f64(),
@@ -1037,7 +1010,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 });
                 println!("{}", serde_json::to_string(&record)?);
             } else {
-                println!("{} variants -> {}", variants.len(), output.display());
+                println!("{} variants -> {}", dirs.len(), output.display());
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -1154,7 +1127,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Slurm { meshes, output, n, seed, profile, overrides, partition, gpus_per_job, dry_run } => {
             let config = load_config(&profile, &overrides)?;
-            let opts = shapeshifter::pipeline::cluster::GraphOptions {
+            let opts = pipeline::cluster::GraphOptions {
                 binary: std::env::current_exe()?,
                 profile,
                 overrides,
@@ -1163,42 +1136,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 partition,
                 gpus_per_job,
             };
-            let several = meshes.len() > 1;
-            // Check every input before submitting anything.
-            let mut stems = std::collections::HashSet::new();
-            for m in &meshes {
-                if !m.is_file() {
-                    anyhow::bail!("{}: no such mesh file", m.display());
-                }
-                let stem = m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                if several && !stems.insert(stem.clone()) {
-                    anyhow::bail!("{}: a second mesh named '{stem}': each exemplar needs its own run folder OUT/{stem}", m.display());
-                }
-            }
-            for m in &meshes {
-                let out = if several {
-                    output.join(m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default())
-                } else {
-                    output.clone()
-                };
-                let jobs = shapeshifter::pipeline::cluster::job_graph(m, &out, &config, &opts)?;
-                let submit = shapeshifter::pipeline::cluster::write_graph(&out.join("slurm"), &jobs)?;
-                if dry_run {
-                    println!("{}: {} jobs written, submit with {}", m.display(), jobs.len(), submit.display());
-                    continue;
-                }
-                let o = std::process::Command::new("bash")
-                    .arg(&submit)
-                    .output()
-                    .map_err(|e| anyhow::anyhow!("{}: cannot run: {e}", submit.display()))?;
-                if !o.status.success() {
-                    anyhow::bail!(
-                        "{}: submission failed: {}",
-                        submit.display(),
-                        String::from_utf8_lossy(&o.stderr).trim().replace('\n', " | ")
-                    );
-                }
-                print!("{}", String::from_utf8_lossy(&o.stdout));
+            for line in pipeline::cluster::submit(&meshes, &output, &config, &opts, dry_run)? {
+                print!("{line}");
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -1231,20 +1170,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(if report.differences.is_empty() && report.compared > 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
         }
         Command::Ladder { dir, output, profile, device: dev } => {
-            let config = match profile.as_deref() {
-                Some("none") => None,
-                Some(p) => Some(Config::load(p, &[])?),
-                None => {
-                    let found = [dir.join("models"), dir.join("..").join("models")]
-                        .into_iter()
-                        .map(|m| m.join("config.toml"))
-                        .find(|p| p.is_file());
-                    Some(match found {
-                        Some(p) => Config::read(&p)?,
-                        None => Config::load("cpu", &[])?,
-                    })
-                }
-            };
+            let (config, from) = pipeline::ladder_config(&dir, profile.as_deref())?;
+            println!("untrained rung: {from}");
             let device = device(&dev)?;
             let outcome = pipeline::ladder_stage(&dir, &output, config.as_ref(), device)?;
             print!("{}", outcome.evaluation.table());
@@ -1260,6 +1187,9 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             );
             for c in &failed {
                 println!("  FAILS {} on {}: {:.4} vs exemplar {:.4} ({})", c.metric, c.rung, c.value, c.exemplar, c.requirement);
+            }
+            if outcome.checks.is_empty() {
+                anyhow::bail!("{}: no check of the expected order could run (every rung skipped?)", dir.display());
             }
             Ok(if failed.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
         }

@@ -301,6 +301,20 @@ fn is_zero_f64(v: &f64) -> bool {
     *v == 0.0
 }
 
+/// The stages whose results depend on sections of the configuration
+/// ([`Config::stage_digest`]); meshing and USD name their own few settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    Encode,
+    Train,
+    Sample,
+}
+
+/// A configuration section as the TOML text stage digests hash.
+fn section_toml<T: Serialize>(section: &T) -> String {
+    toml::to_string(section).expect("configuration sections serialise")
+}
+
 impl Config {
     /// A shipped profile by name, or a TOML file by path, with overrides.
     pub fn load(profile: &str, overrides: &[String]) -> Result<Config> {
@@ -378,43 +392,30 @@ impl Config {
         digest_str(&self.to_toml())
     }
 
-    /// Digest of what one stage depends on, so changing the sampler does not
-    /// invalidate trained models, and so on.
-    pub fn stage_digest(&self, stage: &str) -> String {
-        let part = match stage {
+    /// Digest of the settings one stage depends on, so changing the sampler
+    /// does not invalidate trained models, and so on. The text hashed is the
+    /// TOML of those sections (as it always was: stamps of existing run
+    /// folders stay valid).
+    pub fn stage_digest(&self, stage: Stage) -> String {
+        use crate::learn::schedule::{SAMPLING_PARAMETERISATION, TRAINING_PARAMETERISATION};
+        let parts: Vec<String> = match stage {
             // The layout of the files a stage writes is part of what it did.
-            "encode" => [toml::to_string(&self.encode), toml::to_string(&self.output)]
-                .into_iter()
-                .collect::<Result<Vec<_>, _>>()
-                .map(|v| v.join("\n")),
-            "sample" => [
+            Stage::Encode => vec![section_toml(&self.encode), section_toml(&self.output)],
+            Stage::Train => vec![TRAINING_PARAMETERISATION.into(), section_toml(&self.encode), section_toml(&self.model), section_toml(&self.train)],
+            Stage::Sample => vec![
                 // How networks were taught and how their predictions are stepped.
-                Ok(crate::learn::schedule::TRAINING_PARAMETERISATION.to_string()),
-                Ok(crate::learn::schedule::SAMPLING_PARAMETERISATION.to_string()),
-                toml::to_string(&self.encode),
-                toml::to_string(&self.model),
-                toml::to_string(&self.train),
-                toml::to_string(&self.sample),
-                toml::to_string(&self.output),
+                TRAINING_PARAMETERISATION.into(),
+                SAMPLING_PARAMETERISATION.into(),
+                section_toml(&self.encode),
+                section_toml(&self.model),
+                section_toml(&self.train),
+                section_toml(&self.sample),
+                section_toml(&self.output),
                 // Detail transfer, where on (absent before it existed).
-                if self.transfer.is_off() { Ok(String::new()) } else { toml::to_string(&self.transfer) },
-            ]
-            .into_iter()
-            .collect::<Result<Vec<_>, _>>()
-            .map(|v| v.join("\n")),
-            "train" => [
-                Ok(crate::learn::schedule::TRAINING_PARAMETERISATION.to_string()),
-                toml::to_string(&self.encode),
-                toml::to_string(&self.model),
-                toml::to_string(&self.train),
-            ]
-                .into_iter()
-                .collect::<Result<Vec<_>, _>>()
-                .map(|v| v.join("\n")),
-            _ => Ok(self.to_toml()),
-        }
-        .expect("config serialises");
-        digest_str(&part)
+                if self.transfer.is_off() { String::new() } else { section_toml(&self.transfer) },
+            ],
+        };
+        digest_str(&parts.join("\n"))
     }
 
     /// Number of levels, from the resolutions.
@@ -626,8 +627,8 @@ mod tests {
         let all = Config::load("cpu", &["transfer.from_resolution=32".into()]).unwrap();
         assert_eq!(all.trained_levels(), 1);
         // Recorded, transfer changes what sampling depends on, not training.
-        assert_ne!(all.stage_digest("sample"), cpu.stage_digest("sample"));
-        assert_eq!(all.stage_digest("train"), cpu.stage_digest("train"));
+        assert_ne!(all.stage_digest(Stage::Sample), cpu.stage_digest(Stage::Sample));
+        assert_eq!(all.stage_digest(Stage::Train), cpu.stage_digest(Stage::Train));
         for bad in ["transfer.from_resolution=16", "transfer.from_resolution=100", "transfer.radius=0", "transfer.coherence=1.5"] {
             let e = Config::load("cpu", &[bad.into()]).unwrap_err().to_string();
             assert!(e.contains("transfer"), "{bad}: {e}");
@@ -703,7 +704,7 @@ mod tests {
         assert_eq!(b.encode.voxel_size, Some(2.0));
         assert_eq!(b.encode.up, Some(crate::level::Up::Z));
         assert_eq!(b.encode.cloud_colour, crate::io::cloud::CloudColour::Intensity);
-        assert_ne!(a.stage_digest("encode"), b.stage_digest("encode"));
+        assert_ne!(a.stage_digest(Stage::Encode), b.stage_digest(Stage::Encode));
         assert_eq!(b.with_overrides(&[]).unwrap().encode, b.encode, "recorded and read back");
         assert!(Config::load("cpu", &["encode.voxel_sise=2".into()]).is_err(), "a misspelt key");
     }
@@ -712,11 +713,11 @@ mod tests {
     fn stage_digests_ignore_later_stages() {
         let a = Config::load("cpu", &[]).unwrap();
         let b = Config::load("cpu", &["sample.upper_steps=99".into()]).unwrap();
-        assert_eq!(a.stage_digest("train"), b.stage_digest("train"));
+        assert_eq!(a.stage_digest(Stage::Train), b.stage_digest(Stage::Train));
         assert_ne!(a.digest(), b.digest());
         let c = Config::load("cpu", &["train.crop=17".into()]).unwrap();
-        assert_ne!(a.stage_digest("train"), c.stage_digest("train"));
-        assert_eq!(a.stage_digest("encode"), c.stage_digest("encode"));
+        assert_ne!(a.stage_digest(Stage::Train), c.stage_digest(Stage::Train));
+        assert_eq!(a.stage_digest(Stage::Encode), c.stage_digest(Stage::Encode));
     }
 
     #[test]

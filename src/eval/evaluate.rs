@@ -47,7 +47,8 @@ pub fn level_files(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
         .filter_map(|e| e.ok())
         .filter_map(|e| {
             let name = e.file_name().to_string_lossy().into_owned();
-            let k = name.strip_prefix("level_")?.strip_suffix(".vdb")?.parse().ok()?;
+            let (k, kind) = crate::level::files::parse(&name)?;
+            (kind == crate::level::files::LevelFile::Volumes).then_some(())?;
             Some((k, e.path()))
         })
         .collect();

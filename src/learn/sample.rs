@@ -134,7 +134,7 @@ pub fn untrained_models(config: &Config, levels: usize, device: Device, seed: u6
 }
 
 /// What to sample.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct SampleOptions {
     /// Index of the first variant (a shard of a larger set: `--first K`).
     pub first: usize,

@@ -104,7 +104,7 @@ pub fn time_embedding_rows(t: &Tensor) -> Tensor {
 
 /// The reverse step from time `t` to an earlier time `s` (< t), given the
 /// model's clean-data prediction `x0_hat` (`sample.sampler` in a profile).
-#[derive(Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Sampler {
     /// Ancestral DDPM in continuous time, as the code: c = -expm1(l_t - l_s);
@@ -113,15 +113,6 @@ pub enum Sampler {
     /// Deterministic DDIM: eps_hat = (x_t - alpha_t x0_hat) / sigma_t;
     /// x_s = alpha_s x0_hat + sigma_s eps_hat.
     Ddim,
-}
-
-/// The name in quotes, as the string this setting was before it was an enum:
-/// the sampling stage's reuse stamp hashes the Debug text of its options, and
-/// stamps of existing runs stay valid.
-impl std::fmt::Debug for Sampler {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{:?}", self.to_string())
-    }
 }
 
 impl std::fmt::Display for Sampler {

@@ -74,9 +74,7 @@ pub fn mesh_sha256(mesh: &Mesh) -> String {
 }
 
 
-pub fn level_file_name(index: usize) -> String {
-    format!("level_{index}.vdb")
-}
+pub use super::files::level_file_name;
 
 /// Writes levels, manifest and (optionally) previews into `dir`, which is
 /// created if needed. The manifest is written last: a folder with a manifest
@@ -102,7 +100,7 @@ pub fn write(
         vdb::write_level(&dir.join(&file), level, &provenance, write)?;
         if let Some(opts) = previews {
             let img = render::render_level(level, opts)?;
-            render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
+            render::save_png(&img, &dir.join(super::files::preview_file_name(level.index)))?;
         }
         entries.push(LevelEntry { index: level.index, resolution: level.resolution, voxels: level.len(), file });
     }
@@ -188,7 +186,7 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
                 walk(&p, out)?;
             } else if p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
                 // Points files hold the same points as their level file's volumes.
-                n.starts_with("level_") && n.ends_with(".vdb") && !crate::io::vdb::is_points_file(n)
+                super::files::parse(n).is_some_and(|(_, kind)| kind == super::files::LevelFile::Volumes)
             }) {
                 out.push(p);
             }
@@ -236,7 +234,7 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
     // other levels) must not be read as part of this variant.
     for e in std::fs::read_dir(dir).map_err(|e| Error::file(dir, e.to_string()))?.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        let stale = (name.starts_with("level_") && (name.ends_with(".vdb") || name.ends_with(".png")))
+        let stale = super::files::is_level_file(&name)
             || name.starts_with("mesh.")
             || name.starts_with("stage_");
         if stale {
@@ -251,7 +249,7 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
         vdb::write_level(&dir.join(level_file_name(level.index)), level, provenance, write)?;
         if previews {
             let img = render::render_level(level, &render::preview_options())?;
-            render::save_png(&img, &dir.join(format!("level_{}.png", level.index)))?;
+            render::save_png(&img, &dir.join(super::files::preview_file_name(level.index)))?;
         }
     }
     Ok(())

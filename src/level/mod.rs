@@ -6,6 +6,7 @@
 
 pub mod dataset;
 pub mod edit;
+pub mod files;
 pub mod structure;
 
 use glam::{DVec3, IVec3, Vec3};

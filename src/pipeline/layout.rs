@@ -1,10 +1,45 @@
-//! What the files of a run folder are: the names the mesh and USD steps
-//! write, and a tag for every file a run or `sample` leaves, so a task graph
-//! (Houdini's TOPs, a shell loop) can pick outputs by kind from `--json`.
+//! The run folder's layout: every folder and file name a run writes, and a
+//! tag for every file a run or `sample` leaves, so a task graph (Houdini's
+//! TOPs, a shell loop) can pick outputs by kind from `--json`.
+//!
+//! ```text
+//! OUT/config.toml                  the resolved configuration
+//! OUT/exemplar/                    encoded levels + manifest.json (+ previews)
+//! OUT/models/                      checkpoints, training states, loss plots, logs
+//! OUT/variants/variant_000/        level_K.vdb (+ .points.vdb), level_K.png, mesh.*, variant.usda
+//! OUT/variants.usda                the USD asset: one variant set over the variant layers
+//! OUT/eval.json                    metrics
+//! OUT/contact_sheet.png            the exemplar and the variants, one camera
+//! OUT/report.html                  everything above on one page
+//! OUT/logs/                        logs of sampling/meshing child processes
+//! ```
+//! The level files' names are [`crate::level::files`]'s, the models'
+//! [`crate::learn::checkpoint`]'s, the stage stamps [`super::stamp`]'s.
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
+
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::level::files::LevelFile;
+
+/// The resolved configuration a run (or `sample`, or `train`'s models folder) records.
+pub const CONFIG: &str = "config.toml";
+/// The encoded exemplar's level folder.
+pub const EXEMPLAR_DIR: &str = "exemplar";
+/// Checkpoints, training states, loss plots, training logs.
+pub const MODELS_DIR: &str = "models";
+/// One folder per variant, `variant_NNN`.
+pub const VARIANTS_DIR: &str = "variants";
+pub const VARIANT_PREFIX: &str = "variant_";
+/// The scores of the variants.
+pub const EVAL_JSON: &str = "eval.json";
+/// The exemplar and the variants, one camera.
+pub const CONTACT_SHEET: &str = "contact_sheet.png";
+pub const REPORT: &str = "report.html";
+/// Logs of the sampling and meshing child processes.
+pub const LOGS_DIR: &str = "logs";
 
 /// A variant's vertex-coloured mesh.
 pub const MESH_PLY: &str = "mesh.ply";
@@ -54,20 +89,18 @@ pub fn kind_of(path: &Path) -> Option<FileKind> {
     if name.starts_with('.') || name.starts_with("stage_") || name.ends_with(".tmp") {
         return None;
     }
-    let level = |suffix: &str| {
-        name.strip_prefix("level_").and_then(|r| r.strip_suffix(suffix)).is_some_and(|k| k.parse::<usize>().is_ok())
-    };
+    let level = crate::level::files::parse(name).map(|(_, kind)| kind);
     Some(match name {
-        _ if level(".vdb") => FileKind::LevelVolume,
-        _ if level(".points.vdb") => FileKind::LevelPoints,
+        _ if level == Some(LevelFile::Volumes) => FileKind::LevelVolume,
+        _ if level == Some(LevelFile::Points) => FileKind::LevelPoints,
         MESH_PLY | MESH_GLB | MESH_OBJ | "exemplar.ply" => FileKind::Mesh,
         MESH_MTL | MESH_TEXTURE => FileKind::MeshTexture,
         _ if name.ends_with(".usda") => FileKind::Usd,
-        "report.html" => FileKind::Report,
-        "eval.json" => FileKind::Eval,
+        REPORT => FileKind::Report,
+        EVAL_JSON => FileKind::Eval,
         _ if name.ends_with(".png") => FileKind::Preview,
         _ if name.ends_with(".safetensors") => FileKind::Model,
-        "config.toml" | "manifest.json" => FileKind::Record,
+        CONFIG | crate::level::dataset::MANIFEST => FileKind::Record,
         _ if name.ends_with(".log") || name.ends_with(".csv") => FileKind::Record,
         _ => return None,
     })
@@ -102,18 +135,71 @@ pub fn output_files(root: &Path) -> Vec<OutputFile> {
             }
             let Some(kind) = kind_of(&path) else { continue };
             let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-            let level = name.strip_prefix("level_").and_then(|r| r.split('.').next()).and_then(|k| k.parse().ok());
+            let level = crate::level::files::parse(name).map(|(k, _)| k);
             let variant = path
                 .parent()
                 .and_then(|p| p.file_name())
                 .and_then(|n| n.to_str())
-                .filter(|n| n.starts_with("variant_"))
+                .filter(|n| n.starts_with(VARIANT_PREFIX))
                 .map(str::to_string);
             found.push(OutputFile { path, kind, level, variant, bytes: meta.len() });
         }
     }
     found.sort_by(|a, b| a.path.cmp(&b.path));
     found
+}
+
+/// The folder name of variant `i`: `variant_007`.
+pub fn variant_name(i: usize) -> String {
+    format!("{VARIANT_PREFIX}{i:03}")
+}
+
+pub fn variant_dir(variants_dir: &Path, i: usize) -> PathBuf {
+    variants_dir.join(variant_name(i))
+}
+
+/// The folders and files of a run (see the module documentation), shared by
+/// `run` (every stage in one process) and the `stage` commands (one stage per
+/// process, as a cluster job runs it).
+#[derive(Clone, Debug)]
+pub struct RunPaths {
+    pub root: PathBuf,
+}
+
+impl RunPaths {
+    pub fn new(root: &Path) -> Self {
+        RunPaths { root: root.to_path_buf() }
+    }
+    pub fn config(&self) -> PathBuf {
+        self.root.join(CONFIG)
+    }
+    pub fn exemplar(&self) -> PathBuf {
+        self.root.join(EXEMPLAR_DIR)
+    }
+    pub fn models(&self) -> PathBuf {
+        self.root.join(MODELS_DIR)
+    }
+    pub fn variants(&self) -> PathBuf {
+        self.root.join(VARIANTS_DIR)
+    }
+    pub fn eval_json(&self) -> PathBuf {
+        self.root.join(EVAL_JSON)
+    }
+    pub fn contact_sheet(&self) -> PathBuf {
+        self.root.join(CONTACT_SHEET)
+    }
+    pub fn report(&self) -> PathBuf {
+        self.root.join(REPORT)
+    }
+
+    /// The configuration `stage encode` (or `run`) recorded in the run folder.
+    pub fn read_config(&self) -> Result<Config> {
+        let p = self.config();
+        if !p.is_file() {
+            return Err(Error::file(&self.root, "has no config.toml: run `stage encode` (or `run`) into it first"));
+        }
+        Config::read(&p)
+    }
 }
 
 #[cfg(test)]

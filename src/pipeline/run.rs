@@ -88,7 +88,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     // finds every shard done.
     let t = Instant::now();
     let sharded = jobs > 1 && o.n > 1;
-    let logs = out.join("logs");
+    let logs = out.join(super::layout::LOGS_DIR);
     if sharded {
         std::fs::create_dir_all(&logs).map_err(|e| Error::file(&logs, e.to_string()))?;
         super::run_shards(o.n, jobs, &logs, "sample", |first, count| {
@@ -105,7 +105,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     // A run that made nothing usable is a failure, with the cause in its
     // one error line; some empty variants are a warning.
     let resolutions: Vec<u32> = exemplar_levels.iter().map(|l| l.resolution).collect();
-    let empty = super::empty_variants(&dirs, resolutions.len().saturating_sub(1));
+    let empty = super::empty_variants(&dirs, 0..=resolutions.len().saturating_sub(1));
     super::check_usable(&empty, dirs.len(), &resolutions)?;
 
     let t = Instant::now();

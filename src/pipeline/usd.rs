@@ -13,7 +13,9 @@ use crate::error::{Error, Result};
 use crate::io::usd::{self, LevelVolume, MeshPrim, PointsPrim, StageMetadata, VariantLayer};
 use crate::io::{mesh, vdb};
 
-use super::layout::{ASSET_USD, MESH_OBJ, MESH_PLY, MESH_TEXTURE, VARIANT_USD};
+use super::stamp::StampOf;
+use super::RunPaths;
+use super::layout::{variant_dir, ASSET_USD, MESH_OBJ, MESH_PLY, MESH_TEXTURE, VARIANT_USD};
 
 /// What the variant layer holds, for the log and `--json` (counts 0 where
 /// the layer was reused as it was).
@@ -142,20 +144,20 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
     for dir in dirs {
         crate::util::interrupt::check()?;
         let t = std::time::Instant::now();
-        let Some(sampled) = super::read_stamp(dir, "sample") else {
+        let Some(sampled) = super::stamp::read_stamp(dir, StampOf::Sample) else {
             log::warn!("{}: its sampling did not finish: not in the USD asset", dir.display());
             continue;
         };
         // The mesh stamp's digest names the mesh's inputs, its time names
         // this very mesh (a mesh made again from the same inputs by another
         // program version is a new file the layer must be read from).
-        let mesh_stamp = super::stamp_path(dir, "mesh");
-        let meshed = match (super::read_stamp(dir, "mesh"), std::fs::metadata(&mesh_stamp).and_then(|m| m.modified())) {
+        let mesh_stamp = super::stamp::stamp_path(dir, StampOf::Mesh);
+        let meshed = match (super::stamp::read_stamp(dir, StampOf::Mesh), std::fs::metadata(&mesh_stamp).and_then(|m| m.modified())) {
             (Some(s), Ok(t)) => format!("{} {:?}", s.digest, t),
             _ => String::new(),
         };
-        let d = super::digest(&[&sampled.digest, &meshed, &meters_per_unit.to_string(), exemplar]);
-        if super::is_done(dir, "usd", &d) && dir.join(VARIANT_USD).is_file() {
+        let d = super::stamp::digest(&[&sampled.digest, &meshed, &meters_per_unit.to_string(), exemplar]);
+        if super::stamp::is_done(dir, StampOf::Usd, &d) && dir.join(VARIANT_USD).is_file() {
             // Reused: its summary is what the layer holds (read cheaply from the stamp's files).
             variants.push(VariantUsd { path: dir.join(VARIANT_USD), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 });
             continue;
@@ -164,7 +166,7 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
         // failure (a full disk, an unreadable file) is the step's error.
         match write_variant(dir, meters_per_unit, exemplar)? {
             Some(v) => {
-                super::mark_done(dir, "usd", &d, t.elapsed().as_secs_f64())?;
+                super::stamp::mark_done(dir, StampOf::Usd, &d, t.elapsed().as_secs_f64())?;
                 variants.push(v);
             }
             None => log::warn!("{}: pruned to nothing: not in the USD asset", dir.display()),
@@ -173,3 +175,25 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
     let asset = write_asset(root, dirs, exemplar, up, meters_per_unit)?;
     Ok(UsdOutcome { asset, variants })
 }
+
+/// The USD step ([`usd::usd_stage`]) over variants `0..n`, or every variant
+/// folder there is (None: the `usd` command on an existing run folder):
+/// each sampled variant's `variant.usda`, then `OUT/variants.usda`.
+pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Result<usd::UsdOutcome> {
+    let manifest = dataset::read_manifest(&paths.exemplar())?;
+    let dirs: Vec<PathBuf> = match n {
+        Some(n) => (0..n).map(|i| variant_dir(&paths.variants(), i)).filter(|d| d.is_dir()).collect(),
+        None => {
+            let mut dirs: Vec<PathBuf> = std::fs::read_dir(paths.variants())
+                .map_err(|e| Error::file(&paths.variants(), e.to_string()))?
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.is_dir() && p.file_name().is_some_and(|n| n.to_string_lossy().starts_with(super::layout::VARIANT_PREFIX)))
+                .collect();
+            dirs.sort();
+            dirs
+        }
+    };
+    usd::usd_stage(&paths.root, &dirs, &manifest.exemplar, meters_per_unit)
+}
+

@@ -64,7 +64,7 @@ pub fn resume_digest(config: &Config) -> String {
     c.train.upper_iterations = 0;
     c.train.upsampler_iterations = 0;
     c.train.checkpoint_minutes = 0.0;
-    c.stage_digest("train")
+    c.stage_digest(crate::config::Stage::Train)
 }
 
 /// The outcome of [`train_level`].

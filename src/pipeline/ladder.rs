@@ -1,0 +1,122 @@
+//! The degradation ladder of an encoded exemplar (`ladder` command): rungs
+//! written, scored as variants, and the expected order checked.
+
+use std::path::Path;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::evaluate::write_contact_sheet;
+use super::sample::{sample_variants, trained_levels};
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::io::vdb::Provenance;
+use crate::learn::sample::{self, SampleOptions};
+use crate::level::dataset;
+use crate::level::Level;
+use crate::util::fs::write_file;
+
+/// The configuration of the ladder's untrained rung, and where it came
+/// from (said in the command's output): `profile` when given (`none`: no
+/// untrained rung), else the `config.toml` of `dir/models` or
+/// `dir/../models` (a run's layout), else the `cpu` profile.
+pub fn ladder_config(dir: &Path, profile: Option<&str>) -> Result<(Option<Config>, String)> {
+    use super::layout::{CONFIG, MODELS_DIR};
+    Ok(match profile {
+        Some("none") => (None, "none (--profile none)".into()),
+        Some(p) => (Some(Config::load(p, &[])?), format!("the '{p}' profile (--profile)")),
+        None => {
+            let found = [dir.join(MODELS_DIR), dir.join("..").join(MODELS_DIR)].into_iter().map(|m| m.join(CONFIG)).find(|p| p.is_file());
+            match found {
+                Some(p) => (Some(Config::read(&p)?), format!("the configuration of {}", p.display())),
+                None => (
+                    Some(Config::load("cpu", &[])?),
+                    format!("the 'cpu' profile: no {CONFIG} in {0}/{MODELS_DIR} or {0}/../{MODELS_DIR} (--profile P to choose, none to skip)", dir.display()),
+                ),
+            }
+        }
+    })
+}
+
+/// The degradation ladder of an encoded exemplar, scored.
+#[derive(Clone, Debug, Serialize)]
+pub struct LadderOutcome {
+    pub options: crate::eval::ladder::LadderOptions,
+    pub evaluation: crate::eval::evaluate::Evaluation,
+    /// Every expectation on every rung, and whether it held.
+    pub checks: Vec<crate::eval::ladder::CheckResult>,
+    /// Rungs that could not be scored, and why.
+    pub skipped: Vec<String>,
+}
+
+impl LadderOutcome {
+    pub fn failed(&self) -> impl Iterator<Item = &crate::eval::ladder::CheckResult> {
+        self.checks.iter().filter(|c| !c.ok)
+    }
+}
+
+/// Builds the ladder of the encoded exemplar in `exemplar_dir` into `out`
+/// (one folder per rung, `contact_sheet.png`, `ladder.json`), scores every
+/// rung as a variant and checks the expected order. With `config`, the
+/// `untrained` rung is sampled from freshly initialised networks of that
+/// configuration.
+pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, device: tch::Device) -> Result<LadderOutcome> {
+    use crate::eval::ladder::{self, LadderOptions, Rung};
+    let (manifest, levels) = dataset::read(exemplar_dir)?;
+    let options = LadderOptions::default();
+    let mut rungs = ladder::degrade(&levels, &options)?;
+    let mut skipped = Vec::new();
+    match config {
+        Some(config) => {
+            let t = Instant::now();
+            let untrained = sample::untrained_models(config, trained_levels(config, &levels), device, options.seed).and_then(|m| {
+                sample_variants(&m, &levels, &SampleOptions::from_config(config, 1, options.seed), None)
+            });
+            match untrained {
+                Ok(mut v) if v.first().and_then(|l| l.last()).is_some_and(|l| l.len() > 0 && l.index + 1 == levels.len()) => {
+                    log::info!("ladder: untrained networks sampled in {:.1} s", t.elapsed().as_secs_f64());
+                    rungs.push((Rung::Untrained, v.swap_remove(0)));
+                }
+                Ok(_) => skipped.push("untrained: every voxel was pruned before the finest level (nothing to score)".into()),
+                Err(e) => skipped.push(format!("untrained: {e}")),
+            }
+        }
+        None => skipped.push("untrained: no configuration (no models folder, no --profile)".into()),
+    }
+    let provenance = Provenance {
+        exemplar: manifest.exemplar.clone(),
+        seed: Some(options.seed),
+        config_digest: config.map(|c| c.digest()).unwrap_or_default(),
+        exemplar_open: manifest.open_surface,
+        crs: manifest.crs.clone(),
+    };
+    if !rungs.iter().any(|(r, _)| *r == Rung::Untrained) {
+        let _ = std::fs::remove_dir_all(out.join(Rung::Untrained.name()));
+    }
+    ladder::write_rungs(out, &rungs, &provenance)?;
+    let files: Vec<crate::eval::evaluate::VariantFiles> = rungs
+        .iter()
+        .map(|(r, l)| crate::eval::evaluate::VariantFiles {
+            name: r.name().into(),
+            finest: l[l.len() - 1].clone(),
+            coarsest: l[0].clone(),
+            structure: crate::level::structure::structure_level(l).cloned(),
+            mesh: None,
+        })
+        .collect();
+    let evaluation = crate::eval::evaluate::evaluate(exemplar_dir, None, &files, 256)?;
+    skipped.extend(evaluation.unscored.iter().cloned());
+    let finest = &levels[levels.len() - 1];
+    let colourful = crate::eval::metrics::colour::spread(&finest.colours) > 0.02;
+    if !colourful {
+        skipped.push("colour expectations: the exemplar has one colour (nothing to wash out or shuffle)".into());
+    }
+    let checks = ladder::check(&evaluation.report.variants, colourful);
+    let entries: Vec<(String, Level)> = files.into_iter().map(|f| (f.name, f.finest)).collect();
+    write_contact_sheet(&out.join(super::layout::CONTACT_SHEET), &entries)?;
+    let outcome = LadderOutcome { options, evaluation, checks, skipped };
+    let path = out.join("ladder.json");
+    let text = serde_json::to_string_pretty(&outcome).map_err(|e| Error::file(&path, e.to_string()))?;
+    write_file(&path, &text)?;
+    Ok(outcome)
+}

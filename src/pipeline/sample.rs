@@ -1,0 +1,315 @@
+//! Stage 3, sampling: variants coarse to fine from the trained networks (and
+//! detail transfer for the levels it makes), one stamped folder per variant.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::layout::variant_dir;
+use super::stamp::{digest_of, is_done, mark_done, stamped_before_this_command, StampOf};
+use super::RunPaths;
+use crate::config::{Config, Stage};
+use crate::error::{Error, Result};
+use crate::io::vdb::Provenance;
+use crate::learn::sample::{self, SampleOptions};
+use crate::learn::train;
+use crate::level::dataset;
+use crate::level::Level;
+
+/// A sampled variant with nothing at its finest level: its networks' masks
+/// pruned every voxel at `first_empty` (a level index) or before.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct EmptyVariant {
+    pub name: String,
+    pub first_empty: usize,
+}
+
+/// The variant folders of `dirs` lacking a level file of `levels` (the
+/// levels a sampling wrote: all, or those after a `--from` level), with the
+/// first level each lacks.
+pub fn empty_variants(dirs: &[PathBuf], levels: std::ops::RangeInclusive<usize>) -> Vec<EmptyVariant> {
+    dirs.iter()
+        .filter_map(|d| {
+            let first_empty = levels.clone().find(|&k| !d.join(dataset::level_file_name(k)).is_file())?;
+            Some(EmptyVariant { name: d.file_name()?.to_string_lossy().into_owned(), first_empty })
+        })
+        .collect()
+}
+
+/// The error of a sampling that yielded no usable variant, naming where the
+/// shapes vanished (`resolutions[k]`: level k's voxels per axis) and what to try.
+pub fn no_usable_variant(empty: &[EmptyVariant], resolutions: &[u32]) -> Error {
+    let mut at: std::collections::BTreeMap<usize, usize> = Default::default();
+    for e in empty {
+        *at.entry(e.first_empty).or_default() += 1;
+    }
+    let wheres: Vec<String> = at
+        .iter()
+        .map(|(&k, &n)| format!("{n} at level {k} ({}^3)", resolutions.get(k).copied().unwrap_or(0)))
+        .collect();
+    // The level most variants vanished at names the network to train longer.
+    let worst = at.iter().max_by_key(|(_, &n)| n).map_or(0, |(&k, _)| k);
+    let knob = if worst == 0 { "train.level0_iterations" } else { "train.upper_iterations" };
+    Error::Invalid(format!(
+        "no usable variant: all {} variants pruned to nothing ({}): the level's network marked every voxel empty; \
+         train it longer (--set {knob}=N), try another --seed, or check the exemplar's levels (shapeshifter info)",
+        empty.len(),
+        wheres.join(", ")
+    ))
+}
+
+/// The variants of a sampling held in memory (`names[i]` for `variants[i]`,
+/// levels coarsest first) that hold nothing at some level, with the first.
+pub fn empty_sampled(variants: &[Vec<Level>], names: &[String]) -> Vec<EmptyVariant> {
+    variants
+        .iter()
+        .zip(names)
+        .filter_map(|(v, name)| {
+            let first_empty = match v.iter().find(|l| l.is_empty()) {
+                Some(l) => l.index,
+                None if v.is_empty() => 0,
+                None => return None,
+            };
+            Some(EmptyVariant { name: name.clone(), first_empty })
+        })
+        .collect()
+}
+
+/// An honest ending for `total` sampled variants of which `empty` hold
+/// nothing: an error when that is all of them ([`no_usable_variant`]), a
+/// warning naming them when some.
+pub fn check_usable(empty: &[EmptyVariant], total: usize, resolutions: &[u32]) -> Result<()> {
+    if total > 0 && empty.len() == total {
+        return Err(no_usable_variant(empty, resolutions));
+    }
+    if !empty.is_empty() {
+        let names: Vec<String> = empty.iter().map(|e| format!("{} (empty from level {})", e.name, e.first_empty)).collect();
+        log::warn!("{} of {total} variants pruned to nothing and are left out: {}", empty.len(), names.join(", "));
+    }
+    Ok(())
+}
+
+/// What one sampling stage does: which exemplar, models and options, into
+/// which folder of variant folders.
+pub struct SampleJob<'a> {
+    /// The encoded exemplar's levels and manifest.
+    pub exemplar_levels: &'a [Level],
+    pub manifest: &'a dataset::Manifest,
+    pub config: &'a Config,
+    pub device: tch::Device,
+    pub models_dir: &'a Path,
+    /// Where `variant_NNN/` folders go (`OUT/variants` in a run).
+    pub variants_dir: &'a Path,
+    pub options: &'a SampleOptions,
+    /// A level every variant continues from (`sample --from`), with the
+    /// digest of its file.
+    pub from: Option<(&'a Level, &'a str)>,
+    /// Write `level_K.png` previews.
+    pub previews: bool,
+}
+
+/// What a sampled variant depends on (its stamp's digest): the sampling
+/// settings, the trained models, the options except which shard computed it,
+/// the level it continued from, and its index.
+#[derive(serde::Serialize)]
+struct VariantInputs<'a> {
+    settings: String,
+    models: String,
+    options: SampleOptions,
+    from: Option<&'a str>,
+    index: usize,
+}
+
+/// Samples variants `options.first .. first + n` into
+/// `variants_dir/variant_XXX/` (XXX = the variant's index). Each variant
+/// folder is stamped on its own, so shards written by different jobs fill one
+/// folder, a re-run skips what is already there, and a stopped sampling
+/// keeps the variants it finished.
+pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
+    let (config, options, levels) = (job.config, job.options, job.exemplar_levels);
+    let indices: Vec<usize> = (options.first..options.first + options.n).collect();
+    let dirs: Vec<PathBuf> = indices.iter().map(|&i| variant_dir(job.variants_dir, i)).collect();
+    let models_state = std::fs::read_to_string(train::state_path(job.models_dir, trained_levels(config, levels) - 1)).unwrap_or_default();
+    let key = |index: usize| {
+        digest_of(&VariantInputs {
+            settings: config.stage_digest(Stage::Sample),
+            models: crate::util::digest::short(&models_state),
+            options: SampleOptions { first: 0, n: 0, ..options.clone() },
+            from: job.from.map(|(_, sha)| sha),
+            index,
+        })
+    };
+    let todo: Vec<usize> = indices.iter().zip(&dirs).filter(|(&i, d)| !is_done(d, StampOf::Sample, &key(i))).map(|(&i, _)| i).collect();
+    let reused = dirs.iter().zip(&indices).filter(|(d, i)| !todo.contains(i) && stamped_before_this_command(d, StampOf::Sample)).count();
+    if reused > 0 {
+        log::info!("sample: reusing {reused} variants in {}", job.variants_dir.display());
+    }
+    if todo.is_empty() {
+        return Ok(dirs);
+    }
+    let t = Instant::now();
+    let models = sample::load_models(job.models_dir, config, models_needed(config, levels, options.stop_level), job.device)?;
+    let provenance = Provenance {
+        exemplar: job.manifest.exemplar.clone(),
+        seed: Some(options.seed),
+        config_digest: config.digest(),
+        exemplar_open: job.manifest.open_surface,
+        crs: job.manifest.crs.clone(),
+    };
+    for &i in &todo {
+        crate::util::interrupt::check()?;
+        let tv = Instant::now();
+        let one = SampleOptions { first: i, n: 1, ..options.clone() };
+        let v = sample_variants(&models, levels, &one, job.from.map(|(l, _)| l.clone()))?;
+        let dir = variant_dir(job.variants_dir, i);
+        dataset::write_variant(&dir, &v[0], &provenance, job.previews, config.output.write_options())?;
+        mark_done(&dir, StampOf::Sample, &key(i), tv.elapsed().as_secs_f64())?;
+    }
+    log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
+    Ok(dirs)
+}
+
+/// The `sample` command: variants of the encoded exemplar in `exemplar_dir`
+/// from the models in `models_dir` into `output` (its `config.toml` and one
+/// folder per variant), optionally continuing from the level file `from`.
+/// The same stage as a run's ([`sample_stage`]): the same stamps, so a
+/// second call reuses what is there and `stage mesh`-style steps accept it.
+/// Nothing usable is an error; some empty variants a warning.
+pub fn sample_into(
+    exemplar_dir: &Path,
+    models_dir: &Path,
+    output: &Path,
+    config: &Config,
+    device: tch::Device,
+    options: &SampleOptions,
+    from: Option<&Path>,
+    previews: bool,
+) -> Result<Vec<PathBuf>> {
+    let (manifest, levels) = dataset::read(exemplar_dir)?;
+    let from = match from {
+        Some(p) => Some((crate::io::vdb::read_level(p)?.0, dataset::file_sha256(p)?)),
+        None => None,
+    };
+    super::stamp::record_config(output, config)?;
+    let dirs = sample_stage(&SampleJob {
+        exemplar_levels: &levels,
+        manifest: &manifest,
+        config,
+        device,
+        models_dir,
+        variants_dir: output,
+        options,
+        from: from.as_ref().map(|(l, sha)| (l, sha.as_str())),
+        previews,
+    })?;
+    let resolutions: Vec<u32> = levels.iter().map(|l| l.resolution).collect();
+    let finest = options.stop_level.unwrap_or(resolutions.len().saturating_sub(1));
+    // A continuation writes only the levels after the one it started from.
+    let first_written = from.as_ref().map_or(0, |(l, _)| l.index + 1);
+    let empty = empty_variants(&dirs, first_written..=finest);
+    check_usable(&empty, dirs.len(), &resolutions)?;
+    Ok(dirs)
+}
+
+/// Levels of an exemplar with a trained network under `config` (level 0 always has one).
+pub fn trained_levels(config: &Config, exemplar_levels: &[Level]) -> usize {
+    exemplar_levels.len().min(config.trained_levels()).max(1)
+}
+
+/// How many levels' networks sampling up to `stop_level` (None: the finest) needs.
+pub fn models_needed(config: &Config, exemplar_levels: &[Level], stop_level: Option<usize>) -> usize {
+    stop_level.map_or(usize::MAX, |k| k + 1).min(trained_levels(config, exemplar_levels))
+}
+
+/// Samples variants: the trained levels by the reverse process
+/// ([`sample::sample`]), those of `transfer.from_resolution` and finer by detail transfer
+/// ([`transfer::extend`]), up to `opts.stop_level`. With `from` (a level k),
+/// levels k+1 .. are produced from it. Returns, per variant, its levels
+/// coarsest first (`from` itself not included).
+pub fn sample_variants(
+    models: &sample::Models,
+    exemplar_levels: &[Level],
+    opts: &SampleOptions,
+    from: Option<Level>,
+) -> Result<Vec<Vec<Level>>> {
+    let count = exemplar_levels.len();
+    let last = opts.stop_level.unwrap_or(count.saturating_sub(1));
+    if last >= count {
+        return Err(Error::Invalid(format!("stop level {last} asked for, the exemplar has levels 0..{}", count.saturating_sub(1))));
+    }
+    // Levels with a network under the configuration; the finer ones are transferred.
+    let networks = trained_levels(&models.config, exemplar_levels);
+    let diffusion_last = last.min(networks - 1);
+    let start = from.as_ref().map_or(0, |l| l.index + 1);
+    if start <= diffusion_last && models.levels() <= diffusion_last {
+        return Err(Error::Invalid(format!(
+            "level {diffusion_last} needs its trained network (networks of levels 0..{} loaded; detail transfer: {})",
+            models.levels() - 1,
+            match models.config.transfer.from_resolution {
+                0 => "off".to_string(),
+                r => format!("from {r}^3"),
+            }
+        )));
+    }
+    let mut variants = match &from {
+        // Continuing from a level at or past the networks' last: transfer only.
+        Some(level) if level.index >= diffusion_last && level.index < last => vec![Vec::new(); opts.n],
+        _ => sample::sample(models, exemplar_levels, &SampleOptions { stop_level: Some(diffusion_last), ..opts.clone() }, from.clone())?,
+    };
+    if last > diffusion_last {
+        let config = &models.config.transfer;
+        for (i, v) in variants.iter_mut().enumerate() {
+            let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
+            let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, sample::variant_seed(opts.seed, opts.first + i))?;
+            v.extend(finer);
+        }
+    }
+    Ok(variants)
+}
+
+/// Stage 3: samples variants `options.first ..` into `OUT/variants`.
+pub fn run_sample(paths: &RunPaths, config: &Config, device: tch::Device, options: &SampleOptions) -> Result<Vec<PathBuf>> {
+    let (manifest, levels) = dataset::read(&paths.exemplar())?;
+    sample_stage(&SampleJob {
+        exemplar_levels: &levels,
+        manifest: &manifest,
+        config,
+        device,
+        models_dir: &paths.models(),
+        variants_dir: &paths.variants(),
+        options,
+        from: None,
+        previews: true,
+    })
+}
+
+#[cfg(test)]
+mod endings {
+    use super::*;
+
+    /// Variant folders that stop short of the finest level are named with
+    /// the first level they lack; all of them empty is an error naming where
+    /// they vanished, some of them a warning.
+    #[test]
+    fn empty_variants_are_named_and_all_empty_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let dirs: Vec<PathBuf> = (0..3).map(|i| variant_dir(dir.path(), i)).collect();
+        for (d, levels) in dirs.iter().zip([2usize, 1, 0]) {
+            std::fs::create_dir_all(d).unwrap();
+            for k in 0..levels {
+                std::fs::write(d.join(dataset::level_file_name(k)), b"x").unwrap();
+            }
+        }
+        let empty = empty_variants(&dirs, 0..=1);
+        assert_eq!(
+            empty,
+            [EmptyVariant { name: "variant_001".into(), first_empty: 1 }, EmptyVariant { name: "variant_002".into(), first_empty: 0 }]
+        );
+        assert!(check_usable(&empty, 3, &[16, 32]).is_ok(), "one whole variant of three: a warning");
+        let all = empty_variants(&dirs[1..], 0..=1);
+        let e = check_usable(&all, 2, &[16, 32]).unwrap_err().to_string();
+        assert!(e.contains("all 2 variants pruned to nothing (1 at level 0 (16^3), 1 at level 1 (32^3))"), "{e}");
+        let from_memory = empty_sampled(&[vec![Level { index: 0, resolution: 16, ..Default::default() }], vec![]], &["a".into(), "b".into()]);
+        assert_eq!(from_memory.len(), 2);
+        assert_eq!(from_memory[0].first_empty, 0);
+    }
+}
