@@ -42,7 +42,7 @@ interop: build
 	cargo build --release $(CARGO_FEATURES) --example demo_exemplar
 	bash scripts/interop-test.sh
 
-# Every benchmark of the README's performance table (the ruined tower from
+# Every benchmark of docs/performance.md (the ruined tower from
 # ../shared/data where it is present; synthetic shapes stand in otherwise).
 TOWER := ../shared/data/towerruins/towerruins.obj
 bench: build
@@ -54,14 +54,14 @@ bench: build
 	if [ -f $(TOWER) ]; then $(MAKE) decimate-bench; fi
 
 # Light meshes of the ruined tower's 256^3 level: fidelity, time and file size
-# against the triangle budget (README, "Performance").
+# against the triangle budget (docs/performance.md).
 decimate-bench: build
 	./target/release/shapeshifter encode $(TOWER) -o out/decimate
 	./target/release/shapeshifter mesh out/decimate/level_4.vdb -o out/decimate/full.ply
 	cargo run --release $(CARGO_FEATURES) --example decimate_bench -- \
 	  --mesh $(TOWER) --level out/decimate/level_4.vdb --full-mesh out/decimate/full.ply --out out/decimate
 
-# A long mutation campaign against every reader (README, "Hostile files").
+# A long mutation campaign against every reader (docs/hostile-files.md).
 COUNT ?= 2000
 SEED ?= 1
 fuzz: build
@@ -71,7 +71,7 @@ clean:
 	cargo clean
 
 # Our Poisson meshing against Open3D's screened Poisson (depth 9) on the
-# ruined tower's 256^3 level, side by side in one run (README, Performance);
+# ruined tower's 256^3 level, side by side in one run (docs/performance.md);
 # installs Open3D from PyPI into a cache folder outside the work tree.
 bench-poisson: build
 	bash scripts/poisson-vs-open3d.sh

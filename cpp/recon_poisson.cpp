@@ -21,7 +21,7 @@
 // Steps 1 and 2 are CGAL's own sequential code and grow with the
 // triangulation (mostly Steiner points around near-duplicate points), so the
 // Rust side hands over points clustered per 1.5 spacings and normal direction
-// (src/recon/mod.rs; figures in the README's performance section).
+// (src/recon/mod.rs; figures in docs/performance.md).
 //
 // Units: `spacing` and `grid_cell` in world units.
 

@@ -1,4 +1,4 @@
-// @brief Level files: write and read one level as the grids DESIGN.md lists
+// @brief Level files: write and read one level as the grids docs/design.md lists
 // (mask, density, P, N, Cd, points) and summarise any .vdb file for `info`.
 //
 // All grids share one linear transform in the exemplar's own frame: voxel

@@ -1,4 +1,4 @@
-// @brief Level files: one .vdb per level with the grids DESIGN.md lists.
+// @brief Level files: one .vdb per level with the grids docs/design.md lists.
 #pragma once
 #include "rust/cxx.h"
 

@@ -1,4 +1,4 @@
-//! Timings of the evaluation building blocks (METHOD.md section 7):
+//! Timings of the evaluation building blocks (docs/method.md section 7):
 //! voxelisation at 256 of a ~20k-triangle procedural mesh, the exemplar's patch
 //! dictionary, and LP-IoU/LP-F-score with 1000 patches. Median of 3 runs each.
 //!

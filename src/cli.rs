@@ -10,9 +10,9 @@ use shapeshifter::encode::Pooling;
 use shapeshifter::recon::Method;
 use shapeshifter::render::{self, RenderOptions};
 use shapeshifter::config::Config;
-use shapeshifter::learn::sample::{self, SampleOptions};
+use shapeshifter::learn::sample::SampleOptions;
 use shapeshifter::util::lock;
-use shapeshifter::{level::dataset, level::edit, eval::evaluate, io::info, io::mesh, pipeline, learn::sparse, io::vdb};
+use shapeshifter::{level::edit, eval::evaluate, io::info, io::mesh, pipeline, learn::sparse, io::vdb};
 
 #[derive(Parser, Debug)]
 #[command(name = "shapeshifter", version, about = "3D shape variations from one exemplar mesh (ShapeShifter, CVPR 2025)")]
@@ -26,7 +26,7 @@ pub struct Cli {
     /// libtorch CPU threads (0 = libtorch's default, one per core). 1 by
     /// default: the cpu profile's small convolutions run faster on one thread
     /// per process, and independent levels and shards use the other cores
-    /// (README, Performance).
+    /// (docs/performance.md).
     #[arg(long, global = true, default_value_t = 1, env = "SHAPESHIFTER_THREADS")]
     pub threads: i32,
     /// When another command is writing the same output folder, wait for it
@@ -100,7 +100,7 @@ pub enum Command {
         #[command(subcommand)]
         op: EditOp,
     },
-    /// Evaluate variants against the exemplar (METHOD.md section 7): LP-IoU
+    /// Evaluate variants against the exemplar (docs/method.md section 7): LP-IoU
     /// and LP-F-score per variant, diversity (mean pairwise 1 - IoU), and the
     /// Chamfer distance of the coarsest level. Prints a table; writes JSON.
     ///

@@ -36,7 +36,7 @@ pub struct Config {
     #[serde(default)]
     pub mesh: MeshConfig,
     /// The finest levels made by detail transfer instead of a trained network
-    /// (README, Configuration). Not written when off, so the digests of
+    /// (docs/configuration.md). Not written when off, so the digests of
     /// configurations without it stay valid.
     #[serde(default, skip_serializing_if = "crate::transfer::TransferConfig::is_off")]
     pub transfer: crate::transfer::TransferConfig,
@@ -119,7 +119,7 @@ impl MeshConfig {
 }
 
 /// Per-job resources of the cluster job graph, from the measured peaks of
-/// each stage (README, "Running on a cluster") with headroom.
+/// each stage (docs/cluster.md) with headroom.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ClusterConfig {
@@ -229,7 +229,7 @@ pub struct TrainConfig {
     /// Levels >= 1 use t in [0, upper_t_max].
     pub upper_t_max: f64,
     /// The forward process: only the released code's, x_t = alpha x0 + sigma
-    /// eps (README, Configuration). Kept as a recorded setting so that the
+    /// eps (docs/configuration.md). Kept as a recorded setting so that the
     /// digests of existing runs stay valid.
     #[serde(default)]
     pub mixing: Mixing,
@@ -431,8 +431,9 @@ impl Config {
         }
     }
 
-    /// Number of levels with a trained diffusion model: all but the finest
-    /// `transfer.levels`, which detail transfer makes.
+    /// Number of levels with a trained diffusion model: all below
+    /// `transfer.from_resolution` (every level when transfer is off, 0); the
+    /// levels at and above it are made by detail transfer.
     pub fn trained_levels(&self) -> usize {
         let from = self.transfer.from_resolution;
         (0..self.levels()).take_while(|&l| from == 0 || self.encode.coarsest_resolution << l < from).count()

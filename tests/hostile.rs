@@ -1,6 +1,5 @@
 //! Hostile files: every reader turns malformed input into exit 0 or one error
-//! line, never a signal, a runaway or a leftover output (README, "Hostile
-//! files"). The harness is tests/common/hostile.rs; longer campaigns:
+//! line, never a signal, a runaway or a leftover output (docs/hostile-files.md). The harness is tests/common/hostile.rs; longer campaigns:
 //! `cargo run --release --example hostile_campaign`.
 
 #[path = "common/hostile.rs"]

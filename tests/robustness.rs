@@ -1,5 +1,4 @@
-//! Nothing lost, nothing left running, nothing silently empty (README,
-//! "Stops, full disks and two writers"): a disk that fills at every stage of
+//! Nothing lost, nothing left running, nothing silently empty (docs/robustness.md): a disk that fills at every stage of
 //! a run leaves only whole files and the run resumes to the same result;
 //! SIGTERM and SIGINT at training, sampling and meshing end every process of
 //! the run with 143 or 130 and the next run resumes to the same result; a

@@ -1,4 +1,4 @@
-//! Encoding an exemplar mesh into the multiscale sparse levels (METHOD.md section 2).
+//! Encoding an exemplar mesh into the multiscale sparse levels (docs/method.md section 2).
 //!
 //! Deterministic, no learning. The pipeline, in the order [`EncodeStats`] times it:
 //!
@@ -928,7 +928,7 @@ trait PointRule: Copy + Send + Sync {
 struct Quadric([f64; 10]);
 
 /// Singular values below this fraction of the largest are dropped from the
-/// pseudo-inverse (METHOD.md 2.5): directions the planes do not pin down (along a
+/// pseudo-inverse (docs/method.md section 2.5): directions the planes do not pin down (along a
 /// flat patch or a crease) stay at the voxel centre instead of running off.
 const QEM_RELATIVE_THRESHOLD: f64 = 0.05;
 

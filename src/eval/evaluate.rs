@@ -1,4 +1,4 @@
-//! `shapeshifter eval`: METHOD.md section 7 on files: the exemplar (an
+//! `shapeshifter eval`: docs/method.md section 7 on files: the exemplar (an
 //! encoded folder) against variant folders (one `level_K.vdb` per level, and
 //! `mesh.ply` where meshing ran).
 //!

@@ -1,4 +1,4 @@
-//! Evaluation (METHOD.md section 7): the measures ([`metrics`]), the `eval`
+//! Evaluation (docs/method.md section 7): the measures ([`metrics`]), the `eval`
 //! command on folders ([`evaluate`]) and the degradation ladder that
 //! calibrates every measure ([`ladder`]).
 

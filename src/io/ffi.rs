@@ -24,7 +24,9 @@ pub mod bridge {
         /// Texture file names as written in the material file, by index.
         pub texture_ids: Vec<i32>,
         pub texture_files: Vec<String>,
-        /// Faces the reader dropped (repeated vertices, invalid indices).
+        /// Faces OpenMesh read from the file and kept (polygons before
+        /// triangulation): fewer than the header declares when it skipped
+        /// some (repeated vertices, invalid indices, non-manifold edges).
         pub faces_in_file: u64,
     }
 

@@ -1,5 +1,6 @@
-//! Everything that crosses into C++ (the one cxx bridge, [`ffi`], is private
-//! to this folder) and the file formats: exemplars in (meshes through OpenMesh,
+//! Everything that crosses into C++ (the one cxx bridge, [`ffi`], is
+//! `pub(crate)` for its plain data types, e.g. the mesh arrays `obj` fills, and
+//! called only from this folder) and the file formats: exemplars in (meshes through OpenMesh,
 //! OBJ and glTF in Rust; point clouds: PLY, LAS/LAZ, E57) and
 //! out (PLY, glTF binary), level files (OpenVDB), and `info` on any of them.
 

@@ -1,4 +1,4 @@
-//! Level files: one `.vdb` per level, as DESIGN.md "Files that leave the
+//! Level files: one `.vdb` per level, as docs/design.md "Files that leave the
 //! program" says, through the OpenVDB shims of the bridge.
 //!
 //! Grids: `mask`, `density` (fog volume, 1 on surface voxels), `P` (world

@@ -1,4 +1,4 @@
-//! @brief The two learned networks of a level (METHOD.md section 3): the diffusion
+//! @brief The two learned networks of a level (docs/method.md section 3): the diffusion
 //! model M_l, which predicts the clean grid x0 from a noised grid and its time, and
 //! the upsampler U_l, which predicts the fine grid from the coarse one.
 //!
@@ -229,7 +229,7 @@ mod tests {
         tch::manual_seed(0);
         let m0 = new_diffusion(&c, 0, Device::Cpu).unwrap();
         let m1 = new_diffusion(&c, 1, Device::Cpu).unwrap();
-        // METHOD.md: ~0.57 M and ~1.2 M parameters.
+        // docs/method.md section 3: ~0.57 M and ~1.2 M parameters.
         let (p0, p1) = (m0.parameters(), m1.parameters());
         assert!((500_000..650_000).contains(&p0), "level 0: {p0}");
         assert!((1_100_000..1_300_000).contains(&p1), "level 1: {p1}");

@@ -1,4 +1,4 @@
-//! @brief Sampling variants coarse to fine (METHOD.md section 5).
+//! @brief Sampling variants coarse to fine (docs/method.md section 5).
 //!
 //! 1. Level 0: the dense box of the exemplar's level 0, resized per axis by
 //!    `extent` around its centre (the anisotropic control), filled with N(0, 1);
@@ -389,7 +389,7 @@ impl OneVariant<'_> {
             let better = best.as_ref().is_none_or(|(r, _)| rank.partial_cmp(r) == Some(std::cmp::Ordering::Greater));
             // Whole is the criterion. Near copies are not rejected: on the
             // ruined tower that traded copies for towers split open at 64^3,
-            // which the flags call whole (README, "Whole shapes"); the copy
+            // which the flags call whole (docs/results.md, "Whole shapes"); the copy
             // rank only orders the fallback.
             if rank.0 == 1 {
                 if a > 0 {

@@ -1,4 +1,4 @@
-//! The diffusion process of METHOD.md section 4-5: the continuous cosine
+//! The diffusion process of docs/method.md sections 4-5: the continuous cosine
 //! log-SNR schedule, the forward (noising) process, the time embedding, and
 //! the reverse steps: [`Schedule`] and [`Sampler`] (DDPM or DDIM).
 //!
@@ -25,15 +25,17 @@ pub const SAMPLING_PARAMETERISATION: &str =
     "x0=clamped-per-channel(offset 0.5, normal 1, colour [0,1], mask 1); attempts-keep=first-whole-at-64";
 
 /// The continuous cosine schedule (Nichol & Dhariwal) in log-SNR form, as the
-/// released code uses it: log SNR(t) = -log(cos((t+s)/(1+s) * pi/2)^-2 - 1),
-/// clamped so that it stays finite at both ends. Training noises with it and
-/// both samplers step with it.
+/// released code uses it: log SNR(t) = -log(cos((t+s)/(1+s) * pi/2)^-2 - 1).
+/// Only the clean end is clamped (log-SNR at most -ln(clamp) = 11.5, which
+/// the offset already keeps t = 0 below: 8.77); the noisy end is finite
+/// because cos(pi/2) is 6.1e-17 in f64, not 0: log-SNR(1) = -74.7, alpha(1)
+/// = 6.1e-17 (pure noise). Training noises with it and both samplers step with it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Schedule {
     /// The offset s (0.008).
     pub offset: f64,
     /// Lower clamp of cos^-2 - 1 (1e-5: log-SNR at most ~11.5; the offset keeps
-    /// t = 0 below it: log-SNR(0) = 8.8, alpha(0) = 0.99992, sigma(0) = 0.0125).
+    /// t = 0 below it: log-SNR(0) = 8.77, alpha(0) = 0.99992, sigma(0) = 0.0125).
     pub clamp: f64,
 }
 
@@ -78,20 +80,9 @@ impl Schedule {
     }
 }
 
-/// The 6-number time embedding: sin and cos of 2^k * pi * t for k = 0, 1, 2,
-/// repeated for `rows` voxels: a [rows, 6] tensor (concatenated to each
-/// voxel's features by the model).
-pub fn time_embedding(t: f64, rows: i64, device: tch::Device) -> Tensor {
-    let mut v = Vec::with_capacity(6);
-    for k in 0..3 {
-        let a = (1u32 << k) as f64 * std::f64::consts::PI * t;
-        v.push(a.sin() as f32);
-        v.push(a.cos() as f32);
-    }
-    Tensor::from_slice(&v).to_device(device).unsqueeze(0).expand([rows, 6], false).contiguous()
-}
-
-/// Per-row time embedding for a batch of different times `t` ([rows] f32).
+/// The 6-number time embedding of each row: sin and cos of 2^k * pi * t
+/// for k = 0, 1, 2, for a batch of times `t` ([rows] f32) -> [rows, 6]
+/// (concatenated to each voxel's features by the model).
 pub fn time_embedding_rows(t: &Tensor) -> Tensor {
     let mut parts = Vec::with_capacity(6);
     for k in 0..3 {
@@ -275,14 +266,19 @@ mod tests {
     }
 
     #[test]
-    fn embedding_is_six_sin_cos() {
-        let e = time_embedding(0.25, 4, tch::Device::Cpu);
-        assert_eq!(e.size(), vec![4, 6]);
-        let v: Vec<f32> = Vec::try_from(e.get(2)).unwrap();
+    fn embedding_is_six_sin_cos_per_row() {
+        let e = time_embedding_rows(&Tensor::from_slice(&[0.0f32, 0.25, 0.5]));
+        assert_eq!(e.size(), vec![3, 6]);
         let pi = std::f32::consts::PI;
-        let want = [(pi / 4.).sin(), (pi / 4.).cos(), (pi / 2.).sin(), (pi / 2.).cos(), pi.sin(), pi.cos()];
-        for (a, b) in v.iter().zip(want) {
-            assert!((a - b).abs() < 1e-6);
+        for (row, t) in [0.0f32, 0.25, 0.5].into_iter().enumerate() {
+            let v: Vec<f32> = Vec::try_from(e.get(row as i64)).unwrap();
+            let want: Vec<f32> = (0..3).flat_map(|k| {
+                let a = (1 << k) as f32 * pi * t;
+                [a.sin(), a.cos()]
+            }).collect();
+            for (a, b) in v.iter().zip(&want) {
+                assert!((a - b).abs() < 1e-6, "row {row}: {v:?} vs {want:?}");
+            }
         }
     }
 }

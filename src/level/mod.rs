@@ -1,5 +1,5 @@
 //! One level of the multiscale representation: a sparse set of voxels with the
-//! method's 10 channels (METHOD.md section 1), as plain data.
+//! method's 10 channels (docs/method.md section 1), as plain data.
 //!
 //! Channel order, named once here and nowhere else by bare number:
 //! offset (3), normal (3), colour (3), mask (1). See [`Channel`].

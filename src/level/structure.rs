@@ -240,7 +240,7 @@ pub fn free_boundary(level: &Level) -> Vec<bool> {
 }
 
 /// Thresholds of the structural flags, in the figures' own units. Chosen on
-/// the degradation ladder and on sampled variants (README, "Whole shapes").
+/// the degradation ladder and on sampled variants (docs/results.md, "Whole shapes").
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct StructureParams {
     /// A variant with less surface than this share of the exemplar's (or

@@ -5,6 +5,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use super::children::train_in_processes;
+use super::sample::trained_levels;
 use super::stamp::{digest, is_done, mark_done, record_config, StampOf};
 use super::RunPaths;
 use crate::config::{Config, Stage};

@@ -179,8 +179,8 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
 /// The USD step ([`usd::usd_stage`]) over variants `0..n`, or every variant
 /// folder there is (None: the `usd` command on an existing run folder):
 /// each sampled variant's `variant.usda`, then `OUT/variants.usda`.
-pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Result<usd::UsdOutcome> {
-    let manifest = dataset::read_manifest(&paths.exemplar())?;
+pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Result<UsdOutcome> {
+    let manifest = crate::level::dataset::read_manifest(&paths.exemplar())?;
     let dirs: Vec<PathBuf> = match n {
         Some(n) => (0..n).map(|i| variant_dir(&paths.variants(), i)).filter(|d| d.is_dir()).collect(),
         None => {
@@ -194,6 +194,6 @@ pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Resu
             dirs
         }
     };
-    usd::usd_stage(&paths.root, &dirs, &manifest.exemplar, meters_per_unit)
+    usd_stage(&paths.root, &dirs, &manifest.exemplar, meters_per_unit)
 }
 

@@ -1,4 +1,4 @@
-//! Meshing of oriented points (METHOD.md section 6): Poisson reconstruction for
+//! Meshing of oriented points (docs/method.md section 6): Poisson reconstruction for
 //! closed shapes, algebraic point set surfaces (APSS) for open ones. Vertex
 //! colours come from the nearest input point.
 //!
@@ -31,7 +31,7 @@
 //! two sides of thin sheets apart (a plain grid or Poisson-disk thinning
 //! merged them); projection onto the APSS surface of all the points restores
 //! what the coarser function loses. Timings and distances against Open3D are
-//! in the README's performance section (`make bench-poisson`).
+//! in docs/performance.md (`make bench-poisson`).
 
 mod apss;
 pub mod bake;

@@ -426,7 +426,7 @@ fn key(dist: f32, id: usize) -> u64 {
 /// pixels, row-major inside a tile and tiles row-major over the image. A
 /// splat or a triangle then touches a few tiles (a few pages) rather than one
 /// page per image row, which measured faster than a row-major buffer
-/// (README, Performance).
+/// (docs/performance.md).
 struct Grid {
     w: usize,
     h: usize,

@@ -2,8 +2,8 @@
 
 /// Tunes glibc's allocator for large tensors: by default it returns every
 /// large block to the OS (mmap / trim), so each big im2col buffer of the sparse
-/// convolution is page-faulted in again (measured: DESIGN.md, and README,
-/// Performance: `conv_bench --no-tune`). Call once at start-up.
+/// convolution is page-faulted in again (measured: docs/design.md, and docs/performance.md:
+/// `conv_bench --no-tune`). Call once at start-up.
 pub fn tune_allocator() {
     // SAFETY: mallopt only changes allocator thresholds.
     unsafe {

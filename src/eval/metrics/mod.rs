@@ -1,4 +1,4 @@
-//! Evaluation (METHOD.md section 7): solid voxelisation, IoU and diversity,
+//! Evaluation (docs/method.md section 7): solid voxelisation, IoU and diversity,
 //! local-patch plausibility (LP-IoU, LP-F-score) and point-set distances.
 //!
 //! # Units
@@ -8,7 +8,7 @@
 //!   that is voxelised is given in world units and mapped through the
 //!   exemplar's [`Frame`](crate::level::Frame) held by the grid.
 //! - *Normalised units*: the exemplar normalised so its bounding-box diagonal is 2
-//!   (METHOD.md section 2.1). [`OccupancyGrid::origin`] and
+//!   (docs/method.md section 2.1). [`OccupancyGrid::origin`] and
 //!   [`OccupancyGrid::voxel`] are in normalised units, and so is the coarse
 //!   Chamfer distance of the report ([`level_points_normalised`]).
 //! - *Voxels*: cells of the evaluation lattice, `resolution` (default 256) of them

@@ -1,7 +1,7 @@
 //! The evaluation lattice ([`OccupancyGrid`]) and voxel sets on it
 //! ([`Occupancy`]: bit-packed, with the surface, boundary and dilation the
 //! local patches are cut from), and the two measures of whole occupancies:
-//! [`iou`] and [`diversity`] (METHOD.md section 7).
+//! [`iou`] and [`diversity`] (docs/method.md section 7).
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -10,7 +10,7 @@ use crate::io::mesh::Mesh;
 use crate::level::Frame;
 
 /// Default evaluation resolution: voxels along the longest side of the
-/// exemplar's bounding box (METHOD.md section 7).
+/// exemplar's bounding box (docs/method.md section 7).
 pub const DEFAULT_RESOLUTION: u32 = 256;
 
 /// Default margin around the exemplar's box, normalised units: one level-0 voxel
@@ -373,7 +373,7 @@ pub fn iou(a: &Occupancy, b: &Occupancy) -> f64 {
     }
 }
 
-/// Diversity (METHOD.md section 7): mean over all unordered pairs of `1 - IoU`.
+/// Diversity (docs/method.md section 7): mean over all unordered pairs of `1 - IoU`.
 /// 0 for fewer than two shapes.
 pub fn diversity(variants: &[Occupancy]) -> f64 {
     let n = variants.len();

@@ -67,7 +67,8 @@ pub const ONE_COLOUR_SPREAD: f64 = 0.02;
 pub struct StructureSummary {
     /// Resolution of the level the structure was measured at.
     pub resolution: u32,
-    /// Variants with no flag that says broken (fragment, shrunken, pieces, torn).
+    /// Variants with no flag that says broken (every flag but near-copy:
+    /// fragment, shrunken, pieces, torn, open; [`crate::level::structure::Flag::broken`]).
     pub whole: usize,
     pub scored: usize,
     /// Variants flagged as near copies of the exemplar.
@@ -148,7 +149,7 @@ pub fn check_shape(s: &ShapeInput) -> Result<(), DegenerateShape> {
     Ok(())
 }
 
-/// Everything of METHOD.md section 7 and the two-sided measures for a set of
+/// Everything of docs/method.md section 7 and the two-sided measures for a set of
 /// variants: precision and coverage of 11^3 patches on two lattices (the
 /// exemplar's dictionaries built once, one dictionary per variant for
 /// coverage), surface detail, colour patches, coarse Chamfer where both point

@@ -46,7 +46,7 @@ struct SweepTri {
 /// number (columns through a hole get 1/2 and stay empty); the surface voxels
 /// still keep the sheet itself.
 ///
-/// The absolute value (deviation from METHOD.md's "winding number > 0.5") makes a
+/// The absolute value (deviation from the paper's "winding number > 0.5", docs/method.md section 9) makes a
 /// mesh with all faces flipped inward voxelise to the same solid as the correctly
 /// oriented one (winding -1 inside); meshes with consistent orientation are not
 /// affected.

@@ -59,7 +59,7 @@ const CUDA_CHUNK_BYTES: usize = 256 << 20;
 
 /// Size of one im2col block on the CPU, bytes (default 128 MiB, and at least 2048
 /// rows): the GEMM `[rows, k^3 C] x [k^3 C, C_out]` measured slower with small
-/// blocks than the cache saves (README, Performance; `conv_bench --chunk-bytes`).
+/// blocks than the cache saves (docs/performance.md; `conv_bench --chunk-bytes`).
 pub fn set_cpu_chunk_bytes(bytes: usize) {
     CPU_CHUNK_BYTES.store(bytes.max(1), Ordering::Relaxed);
 }

@@ -7,7 +7,7 @@
 //! A [`SparseTensor`] is a grid (topology, on the CPU, shared through an `Arc`) and an
 //! `[N, C]` feature tensor (any device) whose row `i` belongs to grid voxel `i`. For a
 //! level, C = 10 in [`Channel`] order (offset, normal, colour, mask). Colours enter the
-//! networks scaled as `s = 2 * (2c - 1)` (range [-2, 2], METHOD.md section 1):
+//! networks scaled as `s = 2 * (2c - 1)` (range [-2, 2], docs/method.md section 1):
 //! [`SparseTensor::from_level`] applies it and [`SparseTensor::to_level`] undoes it
 //! (`c = (s / 2 + 1) / 2`, clamped to [0, 1]); nothing else in this module rescales.
 //!

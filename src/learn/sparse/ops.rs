@@ -3,7 +3,7 @@
 
 use super::*;
 
-/// X_up of METHOD.md section 3: the trilinear guess of the fine grid from a coarse
+/// X_up of docs/method.md section 3: the trilinear guess of the fine grid from a coarse
 /// 10-channel tensor, on the coarse grid's subdivision (all 8 children per voxel).
 ///
 /// 1. Each coarse voxel's point in coarse voxel units, `P = coord + 0.5 + offset`;
@@ -68,7 +68,7 @@ pub fn upsample_trilinear(coarse: &SparseTensor) -> Result<SparseTensor> {
     SparseTensor::new(sub.fine.clone(), out)
 }
 
-/// Level-0 target flooding (METHOD.md section 4): the dense box over each batch
+/// Level-0 target flooding (docs/method.md section 4.3): the dense box over each batch
 /// item's active voxels; every channel but the mask is the ground truth blurred into
 /// the box by one pass of a normalised 9^3 Gaussian (sigma = 1 voxel; weights sum to
 /// 1, applied separably) over the zero-filled box (zero outside it too); inactive

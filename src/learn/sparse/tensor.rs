@@ -205,7 +205,7 @@ impl SparseTensor {
         Self::new(Arc::new(grid), self.feats.index_select(0, &idx))
     }
 
-    /// METHOD.md section 5's prune: keeps the voxels whose mask is > 0 and sets their
+    /// docs/method.md section 5's prune: keeps the voxels whose mask is > 0 and sets their
     /// mask to exactly 1 (10-channel tensors).
     pub fn prune_by_mask(&self) -> Result<Self> {
         if self.channels() != FEATURE_CHANNELS as i64 {

@@ -1,4 +1,4 @@
-//! @brief Training one level of the hierarchy (METHOD.md section 4): the level's
+//! @brief Training one level of the hierarchy (docs/method.md section 4): the level's
 //! upsampler U_l first (levels >= 1), then its diffusion model M_l.
 //!
 //! Data (all built once from the exemplar's levels, on `device`):
@@ -22,7 +22,8 @@
 //! training stopped and resumed ends exactly where an uninterrupted one ends.
 //!
 //! Files in `out_dir` (all written atomically: temporary name, then rename):
-//! `level_K_diffusion.safetensors`, `level_K_upsampler.safetensors` (K >= 1),
+//! `level_K_diffusion.safetensors`, `level_K_diffusion_ema.safetensors` (the
+//! exponential moving average sampling uses), `level_K_upsampler.safetensors` (K >= 1),
 //! `level_K_diffusion_adam.safetensors` and `level_K_upsampler_adam.safetensors`
 //! (the optimiser's moments), `level_K_state.json` ([`TrainState`]), `level_K_loss.png`. Checkpoints are written
 //! every `checkpoint_minutes`, on interruption and at the end; the state file is
