@@ -21,6 +21,8 @@
 //! - [`eval`]: quality measures, the `eval` command, the degradation ladder.
 //! - [`render`]: previews, contact sheets, `report.html`.
 //! - [`pipeline`]: the stages on whole folders, `run`, batches, cluster graphs.
+//! - [`grid`]: the sparse-grid vocabulary below every stage: voxel keys and
+//!   fast maps, the index / normalised / world transform.
 //! - [`geom`], [`util`]: helpers with one home each.
 
 pub mod config;
@@ -28,6 +30,7 @@ pub mod encode;
 pub mod error;
 pub mod eval;
 pub mod geom;
+pub mod grid;
 pub mod io;
 pub mod learn;
 pub mod level;

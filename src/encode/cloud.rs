@@ -105,7 +105,7 @@ pub fn encode_cloud(cloud: &PointCloud, options: &EncodeOptions, format_up: Up) 
                 Some(c) => members.iter().map(|&(_, i)| c[i as usize]).sum::<Vec3>() / m as f32,
                 None => options.default_colour,
             };
-            let centre = super::voxel_centre(key, vs);
+            let centre = super::voxel_centre(key, rs);
             Sample { key, offset: ((mean - centre) / vs).as_vec3(), normal, colour }
         })
         .collect();

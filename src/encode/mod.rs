@@ -365,7 +365,7 @@ fn pool_all<G: PointRule>(
                 |i| samples[i].key,
                 |i| {
                     let s = &samples[i];
-                    let p = voxel_centre(s.key, fine_vs) + s.offset.as_dvec3() * fine_vs;
+                    let p = voxel_centre(s.key, rs) + s.offset.as_dvec3() * fine_vs;
                     Node {
                         key: s.key,
                         normal: s.normal,
@@ -382,9 +382,8 @@ fn pool_all<G: PointRule>(
         if r <= options.finest_resolution {
             // Points (QEM solves) only where a level is output: pooling carries the
             // quadrics or mean points, not the points.
-            let vs = 2.0 / r as f64;
             let points: Vec<DVec3> =
-                nodes.par_iter().map(|n| n.geom.point(voxel_centre(n.key, vs))).collect();
+                nodes.par_iter().map(|n| n.geom.point(voxel_centre(n.key, r))).collect();
             pool_s += t.elapsed().as_secs_f64();
             let t = Instant::now();
             levels.push(level_from_nodes(&nodes, &points, r, frame));
@@ -433,9 +432,9 @@ fn morton_decode(key: u64) -> IVec3 {
     IVec3::new(compact_bits(key >> 2) as i32, compact_bits(key >> 1) as i32, compact_bits(key) as i32)
 }
 
-/// Centre of the voxel with Morton key `key`, normalised units; `vs` = voxel size.
-fn voxel_centre(key: u64, vs: f64) -> DVec3 {
-    (morton_decode(key).as_dvec3() + DVec3::splat(0.5)) * vs - DVec3::ONE
+/// Centre of the voxel with Morton key `key` at `resolution`, normalised units.
+fn voxel_centre(key: u64, resolution: u32) -> DVec3 {
+    crate::grid::GridTransform { resolution, frame: Default::default() }.centre_normalised(morton_decode(key))
 }
 
 // ---------------------------------------------------------------------------------
@@ -873,7 +872,7 @@ fn sample_voxels(
         .par_windows(2)
         .map(|g| {
             let key = pairs.key(g[0]);
-            let centre = voxel_centre(key, vs);
+            let centre = voxel_centre(key, r);
             let mut best = (f64::INFINITY, 0usize, DVec3::X, Feature::Face);
             for i in g[0]..g[1] {
                 let t = pairs.triangle(i);
@@ -1128,7 +1127,7 @@ fn level_from_nodes<G: PointRule>(nodes: &[Node<G>], points: &[DVec3], r: u32, f
         .par_iter()
         .zip(points)
         .map(|(node, &p)| {
-            let c = voxel_centre(node.key, vs);
+            let c = voxel_centre(node.key, r);
             (
                 morton_decode(node.key),
                 clamp_offset((p - c) / vs),
@@ -1413,7 +1412,7 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(sag > 0.0 && sag < 0.05 * vs, "sag {sag}");
         for (i, s) in samples.iter().enumerate() {
-            let p = voxel_centre(s.key, vs) + s.offset.as_dvec3() * vs;
+            let p = voxel_centre(s.key, r) + s.offset.as_dvec3() * vs;
             let rho = (p - centre).length();
             assert!(rho <= radius + 1e-6 * vs && rho >= radius - sag - 1e-6 * vs, "point off the sphere");
             if i % 16 == 0 {
@@ -1475,7 +1474,7 @@ mod tests {
         let vs = 2.0 / 64.0;
         let mut seen = [0; 4];
         for s in &samples {
-            let p = voxel_centre(s.key, vs) + s.offset.as_dvec3() * vs - centre;
+            let p = voxel_centre(s.key, 64) + s.offset.as_dvec3() * vs - centre;
             let on_bound = p.to_array().map(|x| (x.abs() - half).abs() < 1e-6);
             let expected =
                 DVec3::from_array(std::array::from_fn(|i| if on_bound[i] { p[i].signum() } else { 0.0 }));

@@ -33,6 +33,7 @@
 use std::path::Path;
 
 use glam::{IVec3, Vec3};
+use crate::grid::VoxelMap;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
@@ -191,7 +192,7 @@ pub fn fragment(levels: &[Level], removed: f64) -> Vec<Level> {
     let k = level_at(levels, 32);
     let level = &levels[k];
     let act = active(level);
-    let index: std::collections::HashMap<IVec3, usize> = act.iter().enumerate().map(|(n, &i)| (level.coords[i], n)).collect();
+    let index: VoxelMap<usize> = act.iter().enumerate().map(|(n, &i)| (level.coords[i], n)).collect();
     let Some(start) = (0..act.len()).max_by_key(|&n| {
         let c = level.coords[act[n]];
         (c.x, -c.y, -c.z)
@@ -212,7 +213,7 @@ pub fn fragment(levels: &[Level], removed: f64) -> Vec<Level> {
         for dz in -1..=1 {
             for dy in -1..=1 {
                 for dx in -1..=1 {
-                    if let Some(&m) = index.get(&(c + IVec3::new(dx, dy, dz))) {
+                    if let Some(&m) = index.get(c + IVec3::new(dx, dy, dz)) {
                         if !seen[m] {
                             seen[m] = true;
                             queue.push_back(m);
@@ -310,7 +311,7 @@ fn rebin(template: &Level, points: &[Vec3], normals: &[Vec3], colours: &[Vec3]) 
 /// are binned into voxels again. Each iteration blurs by about one voxel.
 pub fn smooth(level: &Level, iterations: usize) -> Level {
     let act = active(level);
-    let index: std::collections::HashMap<IVec3, usize> = act.iter().enumerate().map(|(k, &i)| (level.coords[i], k)).collect();
+    let index: VoxelMap<usize> = act.iter().enumerate().map(|(k, &i)| (level.coords[i], k)).collect();
     let neighbours: Vec<Vec<usize>> = act
         .par_iter()
         .map(|&i| {
@@ -321,7 +322,7 @@ pub fn smooth(level: &Level, iterations: usize) -> Level {
                     for dx in -1..=1 {
                         // Only the same side of the surface: the two faces of
                         // a wall thinner than a voxel or two must not merge.
-                        if let Some(&k) = index.get(&(c + IVec3::new(dx, dy, dz))) {
+                        if let Some(&k) = index.get(c + IVec3::new(dx, dy, dz)) {
                             if level.normals[act[k]].dot(level.normals[i]) > 0.0 {
                                 v.push(k);
                             }
@@ -386,7 +387,7 @@ pub fn blob(coarse: &Level, fine: &Level) -> Level {
     let factor = (fine.resolution / coarse.resolution.max(1)).max(1) as i32;
     let f = factor as f32;
     let act = active(coarse);
-    let index: std::collections::HashMap<IVec3, usize> = act.iter().map(|&i| (coarse.coords[i], i)).collect();
+    let index: VoxelMap<usize> = act.iter().map(|&i| (coarse.coords[i], i)).collect();
     let children: Vec<(IVec3, Vec3, Vec3, Vec3)> = act
         .par_iter()
         .flat_map_iter(|&i| {
@@ -402,7 +403,7 @@ pub fn blob(coarse: &Level, fine: &Level) -> Level {
                 let (mut w_sum, mut d, mut n, mut c) = (0.0f32, 0.0f32, Vec3::ZERO, Vec3::ZERO);
                 for corner in 0..8 {
                     let o = IVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-                    let Some(&j) = index.get(&(b.as_ivec3() + o)) else { continue };
+                    let Some(&j) = index.get(b.as_ivec3() + o) else { continue };
                     let w = [0, 1, 2].iter().map(|&a| if o[a] == 1 { t[a] } else { 1.0 - t[a] }).product::<f32>();
                     let nj = coarse.normals[j].normalize_or_zero();
                     d += w * nj.dot(x - point_voxels(coarse, j));
@@ -633,7 +634,7 @@ mod tests {
         // Tangential drift merges the 1-2 voxel thick shell into fewer voxels.
         assert!(sm.len() as f64 > 0.6 * fine.len() as f64, "{} of {}", sm.len(), fine.len());
         for i in 0..sm.len() {
-            let p = (sm.coords[i].as_vec3() + Vec3::splat(0.5) + sm.offsets[i]) * (2.0 / 64.0) - Vec3::ONE;
+            let p = sm.point_normalised(i).as_vec3();
             // Laplacian smoothing shrinks a sphere a little, never by much here.
             assert!((p.length() - 0.7).abs() < 0.05, "{p}");
         }
@@ -641,7 +642,7 @@ mod tests {
         let b = blob(&coarse, &fine);
         assert!(b.len() as f64 > 0.7 * fine.len() as f64 && (b.len() as f64) < 1.6 * fine.len() as f64, "{} vs {}", b.len(), fine.len());
         for i in 0..b.len() {
-            let p = (b.coords[i].as_vec3() + Vec3::splat(0.5) + b.offsets[i]) * (2.0 / 64.0) - Vec3::ONE;
+            let p = b.point_normalised(i).as_vec3();
             assert!((p.length() - 0.7).abs() < 0.06, "{p}");
         }
     }

@@ -26,7 +26,7 @@ impl OrientedPoints {
     /// The surface points of the voxels with `mask > 0`, in the exemplar's
     /// own world frame, with `spacing` = the level's voxel size in world units.
     pub fn from_level(level: &Level) -> OrientedPoints {
-        let spacing = (level.voxel_size() / level.frame.scale) as f32;
+        let spacing = level.transform().voxel_world() as f32;
         if level.mask.par_iter().all(|&m| m > 0.0) {
             // Every voxel active (the usual case): copy, no index list.
             return OrientedPoints {

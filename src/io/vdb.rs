@@ -83,7 +83,7 @@ fn meta_num(key: &str, kind: MetaKind, number: f64) -> MetaEntry {
 /// Transform of a level: voxel (i,j,k)'s centre in world units is
 /// `origin + ijk * voxel_size`.
 fn world_transform(level: &Level) -> (f64, DVec3) {
-    let voxel_size = level.voxel_size() / level.frame.scale;
+    let voxel_size = level.transform().voxel_world();
     let origin = level.frame.to_world(level.voxel_centre(IVec3::ZERO));
     (voxel_size, origin)
 }
@@ -218,7 +218,7 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
         offsets: Vec::with_capacity(n),
     };
     // Offsets in voxel units from the world positions P.
-    let voxel_world = level.voxel_size() / scale;
+    let voxel_world = level.transform().voxel_world();
     for (i, p) in data.points.chunks_exact(3).enumerate() {
         let centre_world = origin + level.coords[i].as_dvec3() * voxel_world;
         let offset = (DVec3::from_slice(p) - centre_world) / voxel_world;

@@ -6,7 +6,7 @@
 //! Boxes are given in voxel coordinates of the level (what `shapeshifter info`
 //! prints as the grids' bounding boxes), inclusive at both ends.
 
-use std::collections::HashMap;
+use crate::grid::VoxelMap;
 
 use glam::IVec3;
 
@@ -90,11 +90,11 @@ pub fn copy_box(level: &mut Level, region: VoxelBox, to: IVec3) -> Result<usize>
         }
     }
     let copies: Vec<(IVec3, usize)> = picked.iter().map(|&i| (level.coords[i] + shift, i)).collect();
-    let dest: HashMap<IVec3, usize> = copies.iter().copied().collect();
+    let dest: VoxelMap<usize> = copies.iter().copied().collect();
     // Drop voxels that the copy overwrites, then append the copies.
     let src = level.clone();
     let coords = level.coords.clone();
-    level.retain(|i| !dest.contains_key(&coords[i]));
+    level.retain(|i| !dest.contains(coords[i]));
     for (c, i) in copies {
         level.coords.push(c);
         level.offsets.push(src.offsets[i]);

@@ -11,61 +11,7 @@ pub mod structure;
 
 use glam::{DVec3, IVec3, Vec3};
 
-/// Where the normalised cube [-1, 1]^3 sits in the exemplar's own frame.
-/// `world = centre + normalised / scale`; scale = 2 / (bbox diagonal), so the
-/// exemplar's bounding-box diagonal has length 2 after normalisation, or
-/// (`encode --voxel-size`) whatever makes the finest voxel that many world units.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Frame {
-    /// Bounding-box centre of the exemplar, world units.
-    pub centre: DVec3,
-    /// Normalised units per world unit.
-    pub scale: f64,
-    /// The exemplar's vertical axis. Coordinates are never rotated (a level
-    /// file lands where its exemplar was); only cameras use it.
-    pub up: Up,
-}
-
-impl Default for Frame {
-    fn default() -> Self {
-        Frame { centre: DVec3::ZERO, scale: 1.0, up: Up::Y }
-    }
-}
-
-/// Which axis of an exemplar's own coordinates points up.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Up {
-    /// +Y (OBJ, glTF, Houdini, Maya).
-    #[default]
-    Y,
-    /// +Z (LAS/LAZ, E57, Blender, most CAD and GIS).
-    Z,
-}
-
-impl Up {
-    pub fn axis(self) -> Vec3 {
-        match self {
-            Up::Y => Vec3::Y,
-            Up::Z => Vec3::Z,
-        }
-    }
-    pub fn name(self) -> &'static str {
-        match self {
-            Up::Y => "y",
-            Up::Z => "z",
-        }
-    }
-}
-
-impl Frame {
-    pub fn to_world(&self, p: DVec3) -> DVec3 {
-        self.centre + p / self.scale
-    }
-    pub fn to_normalised(&self, p: DVec3) -> DVec3 {
-        (p - self.centre) * self.scale
-    }
-}
+pub use crate::grid::transform::{Frame, GridTransform, Up};
 
 /// The 10 feature channels in storage order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -121,21 +67,25 @@ impl Level {
     pub fn is_empty(&self) -> bool {
         self.coords.is_empty()
     }
+    /// Where this level's voxels are: index <-> normalised <-> world.
+    pub fn transform(&self) -> GridTransform {
+        GridTransform { resolution: self.resolution, frame: self.frame }
+    }
     /// Voxel size in normalised units.
     pub fn voxel_size(&self) -> f64 {
-        2.0 / self.resolution as f64
+        self.transform().voxel_normalised()
     }
     /// Centre of voxel `c` in normalised units.
     pub fn voxel_centre(&self, c: IVec3) -> DVec3 {
-        (c.as_dvec3() + DVec3::splat(0.5)) * self.voxel_size() - DVec3::ONE
+        self.transform().centre_normalised(c)
     }
     /// Surface point of voxel `i` in normalised units.
     pub fn point_normalised(&self, i: usize) -> DVec3 {
-        self.voxel_centre(self.coords[i]) + self.offsets[i].as_dvec3() * self.voxel_size()
+        self.transform().point_normalised(self.coords[i], self.offsets[i])
     }
     /// Surface point of voxel `i` in the exemplar's frame (world units).
     pub fn point_world(&self, i: usize) -> DVec3 {
-        self.frame.to_world(self.point_normalised(i))
+        self.transform().point_world(self.coords[i], self.offsets[i])
     }
     /// The first voxel with a NaN or infinite offset, normal, colour or mask.
     pub fn first_non_finite(&self) -> Option<usize> {

@@ -10,7 +10,9 @@
 //! Everything is measured on the surface voxels (mask > 0) of one level, in
 //! that level's voxels.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
+
+use crate::grid::VoxelMap;
 
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
@@ -85,7 +87,7 @@ impl Structure {
 
 /// Sizes of the 26-connected components of a voxel set, largest first.
 pub fn components(coords: &[IVec3]) -> Vec<usize> {
-    let index: HashMap<IVec3, usize> = coords.iter().enumerate().map(|(i, &c)| (c, i)).collect();
+    let index: VoxelMap<usize> = coords.iter().enumerate().map(|(i, &c)| (c, i)).collect();
     let mut seen = vec![false; coords.len()];
     let mut sizes = Vec::new();
     let mut stack = Vec::new();
@@ -99,7 +101,7 @@ pub fn components(coords: &[IVec3]) -> Vec<usize> {
         while let Some(i) = stack.pop() {
             size += 1;
             for d in NEIGHBOURS_26 {
-                if let Some(&j) = index.get(&(coords[i] + d)) {
+                if let Some(&j) = index.get(coords[i] + d) {
                     if !seen[j] {
                         seen[j] = true;
                         stack.push(j);
@@ -191,7 +193,7 @@ const OPEN_SECTORS: usize = 3;
 /// voxel inside a surface has neighbours all round; a sharp crease keeps its
 /// neighbours on both faces (within the window, near the plane of either).
 pub fn free_boundary(level: &Level) -> Vec<bool> {
-    let index: HashMap<IVec3, usize> =
+    let index: VoxelMap<usize> =
         (0..level.len()).filter(|&i| level.mask[i] > 0.0).map(|i| (level.coords[i], i)).collect();
     let point = |i: usize| level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i];
     (0..level.len())
@@ -208,7 +210,7 @@ pub fn free_boundary(level: &Level) -> Vec<bool> {
             for dz in -2..=2 {
                 for dy in -2..=2 {
                     for dx in -2..=2 {
-                        let Some(&j) = index.get(&(level.coords[i] + IVec3::new(dx, dy, dz))) else { continue };
+                        let Some(&j) = index.get(level.coords[i] + IVec3::new(dx, dy, dz)) else { continue };
                         if j == i || level.normals[j].dot(n) <= 0.0 {
                             continue;
                         }

@@ -6,51 +6,8 @@
 //! of the sorted arrays; a query visits the cells around it and scans those runs.
 
 use glam::Vec3;
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
-/// A small multiplicative hasher for packed integer keys (the std SipHash is
-/// several times slower for the millions of lookups the meshers make).
-#[derive(Default, Clone, Copy)]
-pub(crate) struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        self.0 ^= self.0 >> 29;
-    }
-}
-
-pub(crate) type KeyMap<V> = HashMap<u64, V, BuildHasherDefault<KeyHasher>>;
-
-const KEY_BITS: u32 = 21;
-const KEY_BIAS: i64 = 1 << (KEY_BITS - 1);
-const KEY_MASK: u64 = (1 << KEY_BITS) - 1;
-
-/// Packs integer coordinates in [-2^20, 2^20) into one key.
-#[inline]
-pub(crate) fn pack(c: [i32; 3]) -> u64 {
-    let f = |v: i32| ((v as i64 + KEY_BIAS) as u64) & KEY_MASK;
-    (f(c[0]) << (2 * KEY_BITS)) | (f(c[1]) << KEY_BITS) | f(c[2])
-}
-
-/// Inverse of [`pack`].
-#[inline]
-pub(crate) fn unpack(k: u64) -> [i32; 3] {
-    let f = |v: u64| ((v & KEY_MASK) as i64 - KEY_BIAS) as i32;
-    [f(k >> (2 * KEY_BITS)), f(k >> KEY_BITS), f(k)]
-}
-
-/// Largest coordinate magnitude [`pack`] keeps apart.
-pub(crate) const KEY_LIMIT: i32 = (KEY_BIAS - 1) as i32;
+pub(crate) use crate::grid::key::{pack, unpack, KeyMap, KEY_LIMIT};
 
 pub(crate) struct HashGrid {
     inv_cell: f32,

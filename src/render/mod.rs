@@ -643,7 +643,7 @@ mod tests {
             for j in 0..n {
                 for k in 0..n {
                     let c = IVec3::new(i, j, k);
-                    let lo = c.as_dvec3() * vs - DVec3::ONE;
+                    let lo = level.transform().corner_normalised(c);
                     let hi = lo + DVec3::splat(vs);
                     let near = DVec3::ZERO.clamp(lo, hi).length();
                     let far = lo.abs().max(hi.abs()).length();

@@ -25,7 +25,7 @@
 //! Deterministic: every voxel's random draws come from (seed, round, voxel),
 //! so the result does not depend on the number of threads.
 
-use std::collections::HashMap;
+use crate::grid::VoxelMap;
 
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
@@ -130,7 +130,7 @@ struct Surface<'a> {
     level: &'a Level,
     /// The level's row of each slot.
     rows: Vec<u32>,
-    slot: HashMap<IVec3, u32>,
+    slot: VoxelMap<u32>,
 }
 
 impl<'a> Surface<'a> {
@@ -146,7 +146,7 @@ impl<'a> Surface<'a> {
         self.level.coords[self.rows[s as usize] as usize]
     }
     fn find(&self, c: IVec3) -> Option<u32> {
-        self.slot.get(&c).copied()
+        self.slot.get(c).copied()
     }
     /// The level's row of the surface voxel at `c`.
     fn row(&self, c: IVec3) -> Option<usize> {

@@ -32,7 +32,7 @@
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
-use super::voxel_index::VoxelIndex;
+use crate::grid::VoxelIndex;
 use crate::level::Level;
 use crate::util::rng::Rng;
 

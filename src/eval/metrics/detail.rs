@@ -20,7 +20,7 @@
 use glam::IVec3;
 use rayon::prelude::*;
 
-use super::voxel_index::VoxelIndex;
+use crate::grid::VoxelIndex;
 use crate::level::Level;
 
 /// Angles above this (degrees) count as a sharp feature in `sharp_fraction`.

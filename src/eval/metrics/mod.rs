@@ -73,7 +73,6 @@ mod point_distances;
 mod report;
 #[cfg(test)]
 mod test_shapes;
-mod voxel_index;
 mod voxelise;
 
 pub use colour::{ColourParams, ColourPatches, ColourScores};
