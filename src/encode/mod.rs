@@ -41,18 +41,7 @@ use rayon::prelude::*;
 use crate::level::{Frame, Level};
 use crate::io::mesh::{Mesh, MeshColours};
 
-/// How 2x2x2 children are pooled into a parent's surface point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Pooling {
-    /// Mean of the children's plane quadrics, minimised with a truncated
-    /// pseudo-inverse around the voxel centre: keeps a corner's point on the corner
-    /// (the paper's default, supplement "QEM averaging").
-    #[default]
-    Qem,
-    /// Plain mean of the children's points: rounds corners and creases off.
-    Average,
-}
+pub use crate::level::Pooling;
 
 /// Encoding parameters. Resolutions are voxels per axis over the normalised cube
 /// [-1, 1]^3 and must be powers of two with `coarsest <= finest <= sampling`.
@@ -208,6 +197,24 @@ pub struct EncodeStats {
     /// (resolution, active voxels) for every resolution from coarsest up to sampling,
     /// coarsest first (intermediate resolutions that are not output included).
     pub voxels_per_resolution: Vec<(u32, usize)>,
+}
+
+impl EncodeStats {
+    /// The timings as `manifest.json` records them (seconds by step).
+    pub fn seconds(&self) -> std::collections::BTreeMap<String, f64> {
+        [
+            ("normalise", self.normalise_s),
+            ("voxelise", self.voxelise_s),
+            ("sort", self.sort_s),
+            ("sample", self.sample_s),
+            ("pool", self.pool_s),
+            ("output", self.output_s),
+            ("total", self.total_s),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect()
+    }
 }
 
 /// The frame that maps the mesh's bounding box to the normalised cube: centre = bbox

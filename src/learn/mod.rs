@@ -9,6 +9,6 @@ pub mod grid;
 pub mod nn;
 pub mod sample;
 pub mod schedule;
-pub mod seed;
+pub mod noise;
 pub mod sparse;
 pub mod train;

@@ -47,7 +47,7 @@ use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
-use crate::learn::seed::{derive_seed, Stream};
+use crate::util::seed::{derive_seed, Stream};
 
 /// The trained networks of every level, read from a training folder.
 pub struct Models {
@@ -274,7 +274,7 @@ pub fn variant_seed(run_seed: u64, index: usize) -> u64 {
 /// global generator, of the batch and of the device, so a variant's noise is
 /// the same wherever and with whatever else it is sampled.
 fn gaussian(rows: usize, seed: u64, level: usize, step: usize, device: Device) -> Tensor {
-    crate::learn::seed::standard_normal(rows, FEATURE_CHANNELS, derive_seed(seed, level as u64, Stream::SamplingStep, step as u64), device)
+    crate::learn::noise::standard_normal(rows, FEATURE_CHANNELS, derive_seed(seed, level as u64, Stream::SamplingStep, step as u64), device)
 }
 
 /// Everything one variant's coarse-to-fine pass needs.

@@ -7,16 +7,27 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::encode::{EncodeOptions, EncodeStats};
 use crate::error::{Error, Result};
 use crate::util::fs::write_file;
 use crate::level::Level;
 use crate::io::exemplar::Exemplar;
 use crate::io::mesh::Mesh;
-use crate::render::{self, RenderOptions};
 use crate::io::vdb::{self, Provenance, WriteOptions};
 
 pub const MANIFEST: &str = "manifest.json";
+
+/// How the levels were made, as the manifest records it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Encoding {
+    pub sampling_resolution: u32,
+    pub pooling: super::Pooling,
+    /// Seconds by encoding step.
+    pub seconds: std::collections::BTreeMap<String, f64>,
+}
+
+/// Writes a level's preview picture to the path given (the renderer sits
+/// above this layer: the caller passes it in).
+pub type Preview<'a> = &'a dyn Fn(&Level, &Path) -> Result<()>;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LevelEntry {
@@ -48,7 +59,7 @@ pub struct Manifest {
     pub centre: [f64; 3],
     pub scale: f64,
     pub sampling_resolution: u32,
-    pub pooling: crate::encode::Pooling,
+    pub pooling: super::Pooling,
     pub levels: Vec<LevelEntry>,
     /// Wall seconds per encoding stage.
     pub seconds: std::collections::BTreeMap<String, f64>,
@@ -86,9 +97,8 @@ pub fn write(
     source: &str,
     source_sha256: &str,
     levels: &[Level],
-    options: &EncodeOptions,
-    stats: &EncodeStats,
-    previews: Option<&RenderOptions>,
+    encoding: &Encoding,
+    preview: Option<Preview>,
     write: WriteOptions,
 ) -> Result<Manifest> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
@@ -98,25 +108,12 @@ pub fn write(
     for level in levels {
         let file = level_file_name(level.index);
         vdb::write_level(&dir.join(&file), level, &provenance, write)?;
-        if let Some(opts) = previews {
-            let img = render::render_level(level, opts)?;
-            render::save_png(&img, &dir.join(super::files::preview_file_name(level.index)))?;
+        if let Some(preview) = preview {
+            preview(level, &dir.join(super::files::preview_file_name(level.index)))?;
         }
         entries.push(LevelEntry { index: level.index, resolution: level.resolution, voxels: level.len(), file });
     }
     let frame = levels.first().map(|l| l.frame).unwrap_or_default();
-    let seconds = [
-        ("normalise", stats.normalise_s),
-        ("voxelise", stats.voxelise_s),
-        ("sort", stats.sort_s),
-        ("sample", stats.sample_s),
-        ("pool", stats.pool_s),
-        ("output", stats.output_s),
-        ("total", stats.total_s),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v))
-    .collect();
     let manifest = Manifest {
         creator: vdb::CREATOR.into(),
         exemplar: exemplar.name().to_string(),
@@ -128,10 +125,10 @@ pub fn write(
         open_surface,
         centre: frame.centre.to_array(),
         scale: frame.scale,
-        sampling_resolution: options.sampling_resolution,
-        pooling: options.pooling,
+        sampling_resolution: encoding.sampling_resolution,
+        pooling: encoding.pooling,
         levels: entries,
-        seconds,
+        seconds: encoding.seconds.clone(),
     };
     let path = dir.join(MANIFEST);
     let text = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
@@ -228,7 +225,7 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
 }
 
 /// Writes one variant's levels (and previews) into its folder.
-pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, previews: bool, write: WriteOptions) -> Result<()> {
+pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, preview: Option<Preview>, write: WriteOptions) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     // What an earlier sampling left (levels that are now empty, a mesh of
     // other levels) must not be read as part of this variant.
@@ -247,9 +244,8 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
             continue;
         }
         vdb::write_level(&dir.join(level_file_name(level.index)), level, provenance, write)?;
-        if previews {
-            let img = render::render_level(level, &render::preview_options())?;
-            render::save_png(&img, &dir.join(super::files::preview_file_name(level.index)))?;
+        if let Some(preview) = preview {
+            preview(level, &dir.join(super::files::preview_file_name(level.index)))?;
         }
     }
     Ok(())

@@ -13,6 +13,19 @@ use glam::{DVec3, IVec3, Vec3};
 
 pub use crate::grid::transform::{Frame, GridTransform, Up};
 
+/// How 2x2x2 children are pooled into a parent's surface point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Pooling {
+    /// Mean of the children's plane quadrics, minimised with a truncated
+    /// pseudo-inverse around the voxel centre: keeps a corner's point on the corner
+    /// (the paper's default, supplement "QEM averaging").
+    #[default]
+    Qem,
+    /// Plain mean of the children's points: rounds corners and creases off.
+    Average,
+}
+
 /// The 10 feature channels in storage order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Channel {

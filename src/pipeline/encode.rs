@@ -46,7 +46,8 @@ pub fn encode_file(
     let digest = dataset::file_sha256(mesh_path)?;
     let (levels, stats) = encode::encode_exemplar(&exemplar, options).map_err(|e| Error::file(mesh_path, e.to_string()))?;
     let source = mesh_path.display().to_string();
-    let manifest = dataset::write(dir, &exemplar, &source, &digest, &levels, options, &stats, previews, write)?;
+    let preview = previews.map(|opts| move |level: &Level, path: &Path| write_preview(level, opts, path));
+    let manifest = dataset::write(dir, &exemplar, &source, &digest, &levels, &encoding(options, &stats), preview.as_ref().map(|p| p as _), write)?;
     log::info!(
         "encoded {source} in {:.2} s: {}",
         stats.total_s,
@@ -66,7 +67,8 @@ pub fn encode_stage(exemplar: &Exemplar, source: &str, source_sha: &str, config:
     let t = Instant::now();
     let options = encode_options(config);
     let (levels, stats) = encode::encode_exemplar(exemplar, &options)?;
-    dataset::write(dir, exemplar, source, source_sha, &levels, &options, &stats, Some(&render::preview_options()), config.output.write_options())?;
+    let preview = |level: &Level, path: &Path| write_preview(level, &render::preview_options(), path);
+    dataset::write(dir, exemplar, source, source_sha, &levels, &encoding(&options, &stats), Some(&preview), config.output.write_options())?;
     log::info!(
         "encode: {} levels in {:.1} s ({})",
         levels.len(),
@@ -107,4 +109,14 @@ pub fn run_encode(source: ExemplarSource, paths: &RunPaths, config: &Config) -> 
     }
     let levels = encode_stage(&exemplar, &name, &sha, config, &paths.exemplar())?;
     Ok((name, levels))
+}
+
+/// What the manifest records of an encoding.
+fn encoding(options: &EncodeOptions, stats: &encode::EncodeStats) -> dataset::Encoding {
+    dataset::Encoding { sampling_resolution: options.sampling_resolution, pooling: options.pooling, seconds: stats.seconds() }
+}
+
+/// A level's preview picture (`level_K.png`), as `encode --preview` and runs draw it.
+pub fn write_preview(level: &Level, options: &RenderOptions, path: &Path) -> Result<()> {
+    render::save_png(&render::render_level(level, options)?, path)
 }

@@ -161,7 +161,8 @@ pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
         let one = SampleOptions { first: i, n: 1, ..options.clone() };
         let v = sample_variants(&models, levels, &one, job.from.map(|(l, _)| l.clone()))?;
         let dir = variant_dir(job.variants_dir, i);
-        dataset::write_variant(&dir, &v[0], &provenance, job.previews, config.output.write_options())?;
+        let preview = |level: &Level, path: &Path| super::encode::write_preview(level, &crate::render::preview_options(), path);
+        dataset::write_variant(&dir, &v[0], &provenance, job.previews.then_some(&preview as _), config.output.write_options())?;
         mark_done(&dir, StampOf::Sample, &key(i), tv.elapsed().as_secs_f64())?;
     }
     log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());

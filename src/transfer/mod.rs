@@ -31,7 +31,7 @@ use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::learn::seed::{derive_seed, Stream};
+use crate::util::seed::{derive_seed, Stream};
 use crate::level::Level;
 use crate::util::rng::Rng;
 

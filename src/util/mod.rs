@@ -8,6 +8,7 @@ pub mod fs;
 pub mod interrupt;
 pub mod lock;
 pub mod rng;
+pub mod seed;
 
 /// When this command began its work on its folder: set by `main` at start
 /// and again when a folder lock is taken ([`lock::lock`]); what a

@@ -1,5 +1,5 @@
 //! The mutation harness for hostile files, shared by `tests/hostile.rs` (a
-//! fixed, bounded count in `make test`) and `examples/hostile_campaign.rs` (long
+//! fixed, bounded count in `make test`) and `tools/hostile_campaign.rs` (long
 //! campaigns with a count and a seed).
 //!
 //! 1. Seed inputs are generated (a small coloured sphere in every mesh format,

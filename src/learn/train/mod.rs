@@ -53,7 +53,7 @@ pub use crate::learn::checkpoint::{
     diffusion_checkpoint, diffusion_ema_checkpoint, loss_plot_path, optimiser_checkpoint, read_state, state_path,
     upsampler_checkpoint, TrainState,
 };
-use crate::learn::seed::{derive_seed, Stream};
+use crate::util::seed::{derive_seed, Stream};
 
 use optim::{lr_at, Adam, Ema};
 
@@ -479,7 +479,7 @@ pub fn diffusion_step(
     noise_seed: u64,
 ) -> Result<f64> {
     let size = x0.feats.size();
-    let eps = crate::learn::seed::standard_normal(size[0] as usize, size[1] as usize, noise_seed, x0.feats.device())
+    let eps = crate::learn::noise::standard_normal(size[0] as usize, size[1] as usize, noise_seed, x0.feats.device())
         .to_kind(x0.feats.kind());
     let x_t = x0.with_feats(Schedule::default().add_noise_rows(&x0.feats, t_rows, &eps))?;
     let pred = net.forward_t(&x_t, t_rows, true)?;

@@ -41,27 +41,6 @@ pub fn derive_seed(seed: u64, index: u64, stream: Stream, step: u64) -> u64 {
     h >> 1
 }
 
-/// Standard normal noise of `rows` x `cols` from SplitMix64 and Box-Muller on
-/// the CPU, from `seed` alone: independent of libtorch's global generator, of
-/// the threads and of the device, so the same seed gives the same noise
-/// wherever it is drawn.
-pub fn standard_normal(rows: usize, cols: usize, seed: u64, device: tch::Device) -> tch::Tensor {
-    let mut rng = Rng::new(seed);
-    let n = rows * cols;
-    let mut v = Vec::with_capacity(n + 1);
-    while v.len() < n {
-        // Box-Muller: two normals from two uniforms in (0, 1].
-        let u1 = 1.0 - rng.uniform();
-        let u2 = rng.uniform();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let a = std::f64::consts::TAU * u2;
-        v.push((r * a.cos()) as f32);
-        v.push((r * a.sin()) as f32);
-    }
-    v.truncate(n);
-    tch::Tensor::from_slice(&v).view([rows as i64, cols as i64]).to_device(device)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
