@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand};
 
 use shapeshifter::encode::Pooling;
 use shapeshifter::recon::Method;
-use shapeshifter::render::{self, RenderOptions};
+use shapeshifter::render::RenderOptions;
 use shapeshifter::config::Config;
 use shapeshifter::learn::sample::SampleOptions;
 use shapeshifter::util::lock;
@@ -765,15 +765,6 @@ fn run_many(exemplars: &[(pipeline::ExemplarSource, String, PathBuf)], args: &Ru
     Ok(ExitCode::SUCCESS)
 }
 
-/// What `mesh` reports per input.
-#[derive(serde::Serialize)]
-struct MeshedSummary {
-    method: String,
-    vertices: usize,
-    triangles: usize,
-    boundary_edges: usize,
-}
-
 /// Reports a batch: JSON on request; else one line per input (its output, or
 /// its error on stderr) and, for several inputs, a summary. Exit status 1 when
 /// any input failed.
@@ -906,23 +897,14 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             finish_batch(&report, "encode", several.then_some(output.as_path()), batch.json)
         }
         Command::Edit { input, output, op } => {
-            let (mut level, provenance) = vdb::read_level(&input)?;
-            let what = match op {
-                EditOp::Delete { region } => {
-                    let n = edit::delete_box(&mut level, edit::VoxelBox::parse(&region)?)
-                        .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
-                    format!("deleted {n} voxels")
-                }
+            let edit = match op {
+                EditOp::Delete { region } => edit::Edit::Delete(edit::VoxelBox::parse(&region)?),
                 EditOp::Copy { region, to } => {
-                    let to = edit::parse_ivec3(&to)
-                        .ok_or_else(|| anyhow::anyhow!("--to '{to}': expected x,y,z in voxels"))?;
-                    let n = edit::copy_box(&mut level, edit::VoxelBox::parse(&region)?, to)
-                        .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
-                    format!("copied {n} voxels")
+                    let to = edit::parse_ivec3(&to).ok_or_else(|| anyhow::anyhow!("--to '{to}': expected x,y,z in voxels"))?;
+                    edit::Edit::Copy(edit::VoxelBox::parse(&region)?, to)
                 }
             };
-            vdb::write_level(&output, &level, &provenance, vdb::WriteOptions::default())?;
-            log::info!("{what}; {} voxels -> {}", level.len(), output.display());
+            log::info!("{}", edit::edit_file(&input, &output, edit)?);
             Ok(ExitCode::SUCCESS)
         }
         Command::Eval { exemplar, variants, exemplar_mesh, resolution, output, json } => {
@@ -1048,77 +1030,29 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             if several && preview.is_some() {
                 anyhow::bail!("--preview takes one input (several: run `render` on the meshes)");
             }
-            let names = shapeshifter::pipeline::batch::output_names(&inputs)?;
-            let report = shapeshifter::pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
+            let names = pipeline::batch::output_names(&inputs)?;
+            let report = pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
                 let target = if several { output.join(format!("{name}.{ext}")) } else { output.clone() };
-                let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", input.display());
-                let (level, provenance) = vdb::read_level(input).map_err(|e| e.to_string())?;
-                let (m, used) =
-                    pipeline::mesh_level(&level, provenance.exemplar_open, method.method(), resolution).map_err(|e| fail(&e))?;
-                let m = pipeline::light_mesh(m, faces).map_err(|e| fail(&e))?;
-                if several {
-                    std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
-                }
-                mesh::save(&m, &target, true).map_err(|e| e.to_string())?;
-                if let Some(png) = &preview {
-                    let view = RenderOptions { up: Some(level.frame.up), ..render::preview_options() };
-                    let img = render::render_mesh(&m, &view).map_err(|e| fail(&e))?;
-                    render::save_png(&img, png).map_err(|e| e.to_string())?;
-                }
-                let summary = MeshedSummary {
-                    method: used.to_string(),
-                    vertices: m.positions.len(),
-                    triangles: m.triangles.len(),
-                    boundary_edges: m.edge_counts().0,
-                };
+                let summary = pipeline::mesh_file(input, &target, method.method(), resolution, faces, preview.as_deref())
+                    .map_err(|e| e.to_string())?;
                 Ok((Some(target), summary))
             });
             finish_batch(&report, "mesh", several.then_some(output.as_path()), batch.json)
         }
         Command::Points { inputs, output, batch } => {
             let several = inputs.len() > 1;
-            let names = shapeshifter::pipeline::batch::output_names(&inputs)?;
-            let report = shapeshifter::pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
+            let names = pipeline::batch::output_names(&inputs)?;
+            let report = pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
                 let target = if several { output.join(format!("{name}.ply")) } else { output.clone() };
-                let (level, _) = vdb::read_level(input).map_err(|e| e.to_string())?;
-                let p = pipeline::oriented_points(&level).map_err(|e| format!("{}: {e}", input.display()))?;
-                if several {
-                    std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
-                }
-                mesh::save_points_ply(&target, &p.positions, &p.normals, &p.colours).map_err(|e| e.to_string())?;
-                Ok((Some(target), p.positions.len()))
+                let count = pipeline::points_file(input, &target).map_err(|e| e.to_string())?;
+                Ok((Some(target), count))
             });
             finish_batch(&report, "points", several.then_some(output.as_path()), batch.json)
         }
         Command::Render { inputs, output, view, up } => {
-            if inputs.iter().any(|p| p.is_dir()) {
-                let entries = inputs
-                    .iter()
-                    .map(|d| pipeline::finest_in(d))
-                    .collect::<Result<Vec<_>, _>>()?;
-                pipeline::write_contact_sheet(&output, &entries)?;
-                log::info!("contact sheet of {} folders -> {}", entries.len(), output.display());
-                return Ok(ExitCode::SUCCESS);
+            if let Some(sheet) = pipeline::render_inputs(&inputs, &output, &view.options(), up)? {
+                log::info!("{sheet}");
             }
-            let [input] = inputs.as_slice() else {
-                anyhow::bail!("render: one file (a .vdb level or a mesh), or folders of level files for a contact sheet");
-            };
-            let opts = RenderOptions { up, ..view.options() };
-            let ext = input.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
-            let failed = |e: render::RenderError| anyhow::anyhow!("{}: {e}", input.display());
-            let img = if ext == "vdb" {
-                let (level, _) = vdb::read_level(input)?;
-                render::render_level(&level, &opts).map_err(failed)?
-            } else {
-                match shapeshifter::io::exemplar::Exemplar::load(input)? {
-                    shapeshifter::io::exemplar::Exemplar::Mesh(m) => render::render_mesh(&m, &opts).map_err(failed)?,
-                    shapeshifter::io::exemplar::Exemplar::Cloud(c) => {
-                        let opts = RenderOptions { up: Some(up.unwrap_or(c.up)), ..opts };
-                        render::render_points(&c.oriented_points(opts.up.unwrap()), &opts).map_err(failed)?
-                    }
-                }
-            };
-            render::save_png(&img, &output)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Stage { stage } => {

@@ -143,3 +143,35 @@ pub fn write_report(paths: &RunPaths, n: usize, evaluation: Option<&crate::eval:
     let path = paths.report();
     write_file(&path, &page)
 }
+
+/// The `render` command: one picture of a level file, a mesh or a point
+/// cloud (`up`: the exemplar's vertical axis, where the file does not say),
+/// or, given folders of level files, a contact sheet of their finest levels.
+/// Returns, for a contact sheet, what it holds (for the log).
+pub fn render_inputs(inputs: &[PathBuf], output: &Path, options: &render::RenderOptions, up: Option<crate::level::Up>) -> Result<Option<String>> {
+    use crate::io::exemplar::Exemplar;
+    if inputs.iter().any(|p| p.is_dir()) {
+        let entries = inputs.iter().map(|d| finest_in(d)).collect::<Result<Vec<_>>>()?;
+        write_contact_sheet(output, &entries)?;
+        return Ok(Some(format!("contact sheet of {} folders -> {}", entries.len(), output.display())));
+    }
+    let [input] = inputs else {
+        return Err(Error::Invalid("render: one file (a .vdb level or a mesh), or folders of level files for a contact sheet".into()));
+    };
+    let opts = render::RenderOptions { up, ..options.clone() };
+    let failed = |e: render::RenderError| Error::file(input, e.to_string());
+    let is_level = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("vdb"));
+    let img = if is_level {
+        render::render_level(&vdb::read_level(input)?.0, &opts).map_err(failed)?
+    } else {
+        match Exemplar::load(input)? {
+            Exemplar::Mesh(m) => render::render_mesh(&m, &opts).map_err(failed)?,
+            Exemplar::Cloud(c) => {
+                let up = up.unwrap_or(c.up);
+                render::render_points(&c.oriented_points(up), &render::RenderOptions { up: Some(up), ..opts }).map_err(failed)?
+            }
+        }
+    };
+    render::save_png(&img, output)?;
+    Ok(None)
+}

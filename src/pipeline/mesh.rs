@@ -1,7 +1,7 @@
 //! Stage 4, meshing: each variant's finest level into a mesh (Poisson or
 //! APSS), decimated to a light mesh and baked into a texture where asked.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::layout::{self, variant_dir};
@@ -208,4 +208,53 @@ pub fn run_mesh(paths: &RunPaths, range: std::ops::Range<usize>, settings: &Mesh
         })
         .collect();
     mesh_stage(&dirs, manifest.open_surface, 256, settings)
+}
+
+/// What the `mesh` command reports per input.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MeshedSummary {
+    pub method: String,
+    pub vertices: usize,
+    pub triangles: usize,
+    pub boundary_edges: usize,
+}
+
+/// The `mesh` command on one level file: meshed (`method`, or the one its
+/// exemplar's openness picks; `resolution` contouring cells), decimated to
+/// `faces` (0: not), written to `target` (.ply or .glb, colours kept), and
+/// its picture to `preview`.
+pub fn mesh_file(
+    input: &Path,
+    target: &Path,
+    method: Option<crate::recon::Method>,
+    resolution: Option<u32>,
+    faces: usize,
+    preview: Option<&Path>,
+) -> Result<MeshedSummary> {
+    let (level, provenance) = vdb::read_level(input)?;
+    let named = |e: Error| Error::file(input, e.to_string());
+    let (m, used) = mesh_level(&level, provenance.exemplar_open, method, resolution).map_err(named)?;
+    let m = light_mesh(m, faces).map_err(named)?;
+    if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    }
+    crate::io::mesh::save(&m, target, true)?;
+    if let Some(png) = preview {
+        let view = render::RenderOptions { up: Some(level.frame.up), ..render::preview_options() };
+        let img = render::render_mesh(&m, &view).map_err(|e| Error::file(input, e.to_string()))?;
+        render::save_png(&img, png)?;
+    }
+    Ok(MeshedSummary { method: used.to_string(), vertices: m.positions.len(), triangles: m.triangles.len(), boundary_edges: m.edge_counts().0 })
+}
+
+/// The `points` command on one level file: its surface voxels as an
+/// oriented, coloured PLY point cloud at `target`. Returns the point count.
+pub fn points_file(input: &Path, target: &Path) -> Result<usize> {
+    let (level, _) = vdb::read_level(input)?;
+    let p = oriented_points(&level).map_err(|e| Error::file(input, e.to_string()))?;
+    if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    }
+    crate::io::mesh::save_points_ply(target, &p.positions, &p.normals, &p.colours)?;
+    Ok(p.positions.len())
 }
