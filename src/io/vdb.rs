@@ -117,17 +117,7 @@ pub fn write_level(path: &Path, level: &Level, provenance: &Provenance, opts: Wr
         // Kept as a string: OpenVDB has no unsigned 64-bit metadata.
         meta.push(meta_str("shapeshifter_seed", &seed.to_string()));
     }
-    let n = level.len();
-    let lengths = [level.offsets.len(), level.normals.len(), level.colours.len(), level.mask.len()];
-    if lengths.iter().any(|&l| l != n) {
-        return Err(Error::file(
-            path,
-            format!("inconsistent level: {n} voxels but {lengths:?} offsets/normals/colours/mask; not written"),
-        ));
-    }
-    if let Some(i) = level.first_non_finite() {
-        return Err(Error::file(path, format!("voxel {} has NaN or infinite features; not written", level.coords[i])));
-    }
+    level.check().map_err(|e| Error::file(path, format!("{e}; not written")))?;
     let flat = |v: &[Vec3]| -> Vec<f32> { v.iter().flat_map(|p| p.to_array()).collect() };
     let normals: Vec<Vec3> = level.normals.iter().map(|n| n.normalize_or_zero()).collect();
     let points: Vec<f64> = (0..level.len()).flat_map(|i| level.point_world(i).to_array()).collect();
@@ -238,9 +228,7 @@ pub fn read_level(path: &Path) -> Result<(Level, Provenance)> {
         }
         level.offsets.push(offset.clamp(DVec3::splat(-0.5), DVec3::splat(0.5)).as_vec3());
     }
-    if let Some(i) = level.first_non_finite() {
-        return Err(Error::file(path, format!("voxel {} has NaN or infinite features", level.coords[i])));
-    }
+    level.check().map_err(|e| Error::file(path, e.to_string()))?;
     let provenance = Provenance {
         exemplar: find(&data.meta, "shapeshifter_exemplar").map(|m| m.text.clone()).unwrap_or_default(),
         seed: find(&data.meta, "shapeshifter_seed").and_then(|m| m.text.parse().ok()),

@@ -26,6 +26,11 @@ pub enum Pooling {
     Average,
 }
 
+/// A level that breaks what every stage assumes of it ([`Level::check`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct InvalidLevel(pub String);
+
 /// The 10 feature channels in storage order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Channel {
@@ -100,6 +105,51 @@ impl Level {
     pub fn point_world(&self, i: usize) -> DVec3 {
         self.transform().point_world(self.coords[i], self.offsets[i])
     }
+    /// A level from its parts, checked ([`Level::check`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        index: usize,
+        resolution: u32,
+        frame: Frame,
+        coords: Vec<IVec3>,
+        offsets: Vec<Vec3>,
+        normals: Vec<Vec3>,
+        colours: Vec<Vec3>,
+        mask: Vec<f32>,
+    ) -> Result<Level, InvalidLevel> {
+        let level = Level { index, resolution, coords, offsets, normals, colours, mask, frame };
+        level.check()?;
+        Ok(level)
+    }
+
+    /// What every stage assumes of a level: a power-of-two resolution, one
+    /// offset, normal, colour and mask per voxel, finite features, each voxel
+    /// once. The level files' reader and the networks' input check it; a
+    /// level built field by field (tests, edits) can be checked here.
+    pub fn check(&self) -> Result<(), InvalidLevel> {
+        if !self.resolution.is_power_of_two() {
+            return Err(InvalidLevel(format!("resolution {} is not a power of two", self.resolution)));
+        }
+        let n = self.len();
+        let lengths = [self.offsets.len(), self.normals.len(), self.colours.len(), self.mask.len()];
+        if lengths.iter().any(|&l| l != n) {
+            return Err(InvalidLevel(format!(
+                "level {} has {n} voxels but {} offsets, {} normals, {} colours, {} mask values",
+                self.index, lengths[0], lengths[1], lengths[2], lengths[3]
+            )));
+        }
+        if let Some(i) = self.first_non_finite() {
+            return Err(InvalidLevel(format!("voxel {} has NaN or infinite features", self.coords[i])));
+        }
+        let mut seen = crate::grid::VoxelMap::with_capacity(n);
+        for &c in &self.coords {
+            if seen.insert(c, ()).is_some() {
+                return Err(InvalidLevel(format!("voxel {c} appears more than once")));
+            }
+        }
+        Ok(())
+    }
+
     /// The first voxel with a NaN or infinite offset, normal, colour or mask.
     pub fn first_non_finite(&self) -> Option<usize> {
         (0..self.len()).find(|&i| {
@@ -117,5 +167,28 @@ impl Level {
         self.normals = idx.iter().map(|&i| self.normals[i]).collect();
         self.colours = idx.iter().map(|&i| self.colours[i]).collect();
         self.mask = idx.iter().map(|&i| self.mask[i]).collect();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_voxels() -> (Vec<IVec3>, Vec<Vec3>, Vec<Vec3>, Vec<Vec3>, Vec<f32>) {
+        (vec![IVec3::ZERO, IVec3::X], vec![Vec3::ZERO; 2], vec![Vec3::Y; 2], vec![Vec3::splat(0.5); 2], vec![1.0; 2])
+    }
+
+    #[test]
+    fn a_level_is_checked_where_it_is_built() {
+        let (c, o, n, col, m) = two_voxels();
+        let level = Level::new(1, 32, Frame::default(), c.clone(), o.clone(), n.clone(), col.clone(), m.clone()).unwrap();
+        assert_eq!((level.len(), level.index, level.resolution), (2, 1, 32));
+        let err = |r: Result<Level, InvalidLevel>| r.unwrap_err().to_string();
+        assert!(err(Level::new(1, 24, Frame::default(), c.clone(), o.clone(), n.clone(), col.clone(), m.clone())).contains("power of two"));
+        assert!(err(Level::new(1, 32, Frame::default(), c.clone(), o.clone(), n.clone(), col.clone(), vec![1.0])).contains("1 mask values"));
+        let mut nan = n.clone();
+        nan[1].x = f32::NAN;
+        assert!(err(Level::new(1, 32, Frame::default(), c.clone(), o.clone(), nan, col.clone(), m.clone())).contains("NaN"));
+        assert!(err(Level::new(1, 32, Frame::default(), vec![IVec3::X; 2], o, n, col, m)).contains("more than once"));
     }
 }

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::layout::{self, variant_dir};
-use super::stamp::{digest, is_done, mark_done, stamp_path, StampOf};
+use super::stamp::{digest_of, is_done, mark_done, stamp_path, StampOf};
 use super::RunPaths;
 use crate::config::MeshConfig;
 use crate::error::{Error, Result};
@@ -54,6 +54,19 @@ pub fn mesh_level(
     Ok((mesh, method))
 }
 
+/// What a variant's mesh depends on (its stamp's digest).
+#[derive(serde::Serialize)]
+struct MeshInputs {
+    finest_level_sha256: String,
+    /// Contouring cells along the longest axis.
+    resolution: u32,
+    exemplar_open: bool,
+    faces: usize,
+    glb: bool,
+    /// The baked texture's size, when the light mesh is baked.
+    texture: Option<u32>,
+}
+
 /// Meshes the finest level of every variant folder into `mesh.ply` (and
 /// `mesh.glb` when `settings.glb`), decimated to `settings.faces` triangles
 /// when that is not 0, and `mesh.png`. A light mesh is also baked into a
@@ -79,19 +92,14 @@ pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settin
         let out = dir.join(MESH_PLY);
         let glb = dir.join(MESH_GLB);
         let texture = settings.texture_size();
-        let mut parts = vec![
-            dataset::file_sha256(&finest_file).unwrap_or_default(),
-            resolution.to_string(),
-            exemplar_open.to_string(),
-            settings.faces.to_string(),
-            settings.glb.to_string(),
-        ];
-        // Only a baked mesh's digest names its texture: meshes made before
-        // textures existed stay reused.
-        if let Some(size) = texture {
-            parts.push(format!("texture {size}"));
-        }
-        let d = digest(&parts.iter().map(String::as_str).collect::<Vec<_>>());
+        let d = digest_of(&MeshInputs {
+            finest_level_sha256: dataset::file_sha256(&finest_file).unwrap_or_default(),
+            resolution,
+            exemplar_open,
+            faces: settings.faces,
+            glb: settings.glb,
+            texture,
+        });
         let textured_files = [MESH_OBJ, MESH_MTL, MESH_TEXTURE].map(|f| dir.join(f));
         let complete = out.is_file()
             && (glb.is_file() || !(settings.glb || texture.is_some()))

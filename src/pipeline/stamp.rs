@@ -73,7 +73,10 @@ pub fn stamped_before_this_command(dir: &Path, of: StampOf) -> bool {
         .is_ok_and(|t| t < crate::util::command_started())
 }
 
-/// Short digest of delimited parts.
+/// Short digest of delimited parts: the form of the encoding and training
+/// stamps (the source's digest, [`Config::stage_digest`], the level), kept
+/// so that encoded exemplars and trained models of earlier versions (hours of
+/// CPU) stay reused; every other stage hashes a typed record ([`digest_of`]).
 pub fn digest(parts: &[&str]) -> String {
     crate::util::digest::short_of_parts(parts)
 }

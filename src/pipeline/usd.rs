@@ -17,6 +17,16 @@ use super::stamp::StampOf;
 use super::RunPaths;
 use super::layout::{variant_dir, ASSET_USD, MESH_OBJ, MESH_PLY, MESH_TEXTURE, VARIANT_USD};
 
+/// What a variant's USD layer depends on (its stamp's digest): the variant's
+/// sample stamp, its mesh stamp with the mesh's time, the units, the name.
+#[derive(serde::Serialize)]
+struct UsdInputs<'a> {
+    sampled: &'a str,
+    meshed: &'a str,
+    meters_per_unit: f64,
+    exemplar: &'a str,
+}
+
 /// What the variant layer holds, for the log and `--json` (counts 0 where
 /// the layer was reused as it was).
 #[derive(Clone, Debug, serde::Serialize)]
@@ -156,7 +166,7 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
             (Some(s), Ok(t)) => format!("{} {:?}", s.digest, t),
             _ => String::new(),
         };
-        let d = super::stamp::digest(&[&sampled.digest, &meshed, &meters_per_unit.to_string(), exemplar]);
+        let d = super::stamp::digest_of(&UsdInputs { sampled: &sampled.digest, meshed: &meshed, meters_per_unit, exemplar });
         if super::stamp::is_done(dir, StampOf::Usd, &d) && dir.join(VARIANT_USD).is_file() {
             // Reused: its summary is what the layer holds (read cheaply from the stamp's files).
             variants.push(VariantUsd { path: dir.join(VARIANT_USD), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 });

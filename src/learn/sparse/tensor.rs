@@ -122,11 +122,8 @@ impl SparseTensor {
     /// colours scaled to `2 * (2c - 1)`; rows sorted like the grid.
     pub fn from_level(level: &Level, device: Device) -> Result<Self> {
         let n = level.len();
-        if [level.offsets.len(), level.normals.len(), level.colours.len(), level.mask.len()]
-            .iter()
-            .any(|&l| l != n)
-        {
-            return invalid(format!("level {} has arrays of different lengths", level.index));
+        if let Err(e) = level.check() {
+            return invalid(e.to_string());
         }
         let (grid, order) = SparseGrid::from_unique_coords(level.resolution, &level.coords)?;
         let flat: Vec<f32> = order
