@@ -113,6 +113,7 @@ pub fn train_stage(
         // Resume whatever a previous (killed) run of this level left.
         let resume = train::state_path(models_dir, k).exists();
         let r = train::train_level(&train::TrainJob { resume, progress, ..train::TrainJob::new(levels, k, config, device, models_dir) })?;
+        write_loss_plot(models_dir, k, config)?;
         log::info!(
             "train level {k}: {} + {} steps in {:.0} s, loss {:.4} -> {:.4}",
             r.upsampler_steps,
@@ -208,4 +209,18 @@ pub fn train_folder(job: &TrainFolder) -> Result<Trained> {
     }
     let reports = train_stage(&levels, &manifest.source_sha256, job.config, job.device, job.models, job.level, job.progress)?;
     Ok(Trained::InThisProcess(reports))
+}
+
+/// `models/level_K_loss.png` from the level's recorded state: the loss of
+/// every step, and the learning rate where a schedule makes it vary.
+pub fn write_loss_plot(models: &Path, k: usize, config: &Config) -> Result<()> {
+    use crate::render::loss_plot::{self, PhaseCurve};
+    let Some(state) = train::read_state(models, k) else { return Ok(()) };
+    let (up_lr, diff_lr) = train::learning_rates(&state, config);
+    loss_plot::write_loss_plot(
+        &train::loss_plot_path(models, k),
+        k,
+        PhaseCurve { loss: &state.upsampler_loss, lr: up_lr.as_deref() },
+        PhaseCurve { loss: &state.diffusion_loss, lr: diff_lr.as_deref() },
+    )
 }

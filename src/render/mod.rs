@@ -34,6 +34,7 @@ use crate::level::Level;
 use crate::io::mesh::{Mesh, MeshColours};
 
 mod contact;
+pub mod loss_plot;
 pub mod report;
 pub use contact::{contact_sheet, SheetOptions};
 

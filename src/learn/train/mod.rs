@@ -47,7 +47,6 @@ use crate::learn::nn::{mse, new_diffusion, new_upsampler, DiffusionNet, LevelNet
 use crate::learn::sparse::{flood_blur, upsample_trilinear, SparseTensor};
 
 pub mod optim;
-pub mod plot;
 
 pub use crate::learn::checkpoint::{
     diffusion_checkpoint, diffusion_ema_checkpoint, loss_plot_path, optimiser_checkpoint, read_state, state_path,
@@ -182,6 +181,17 @@ fn starting_state(job: &TrainJob, digest: &str) -> Result<TrainState> {
         log::info!("level {level}: nothing to resume in {}, starting afresh", job.out_dir.display());
     }
     Ok(state)
+}
+
+/// The learning rate of each step a level's state records, per phase
+/// (upsampler, diffusion), for its loss plot; None where the schedule is
+/// constant (nothing to draw).
+pub fn learning_rates(state: &TrainState, config: &Config) -> (Option<Vec<f64>>, Option<Vec<f64>>) {
+    let tc = &config.train;
+    let schedule = tc.lr_warmup_steps > 0 || tc.lr_final_ratio != 1.0;
+    let diff_total = if state.level == 0 { tc.level0_iterations } else { tc.upper_iterations };
+    let lrs = |n: usize, total: usize, base: f64| schedule.then(|| (0..n).map(|s| lr_at(s, total, base, tc.lr_warmup_steps, tc.lr_final_ratio)).collect::<Vec<f64>>());
+    (lrs(state.upsampler_loss.len(), tc.upsampler_iterations, tc.upsampler_lr), lrs(state.diffusion_loss.len(), diff_total, tc.lr))
 }
 
 /// Trains one level: the upsampler (levels >= 1), then the diffusion model.
@@ -336,18 +346,6 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         && (level == 0 || state.upsampler_steps >= tc.upsampler_iterations);
     state.seconds = seconds_before + t0.elapsed().as_secs_f64();
     ckpt.save(&state, upsampler.as_ref().zip(up_opt.as_ref()), Some((&diffusion, &diff_opt, &ema)))?;
-    let plot = loss_plot_path(out_dir, level);
-    // The learning rate of each step, drawn only when a schedule makes it vary.
-    let schedule = tc.lr_warmup_steps > 0 || tc.lr_final_ratio != 1.0;
-    let lrs = |n: usize, total: usize, base: f64| schedule.then(|| (0..n).map(|s| lr(s, total, base)).collect::<Vec<f64>>());
-    let up_lr = lrs(state.upsampler_loss.len(), tc.upsampler_iterations, tc.upsampler_lr);
-    let diff_lr = lrs(state.diffusion_loss.len(), diff_total, tc.lr);
-    plot::write_loss_plot(
-        &plot,
-        level,
-        plot::PhaseCurve { loss: &state.upsampler_loss, lr: up_lr.as_deref() },
-        plot::PhaseCurve { loss: &state.diffusion_loss, lr: diff_lr.as_deref() },
-    )?;
 
     let (ds, de) = start_end(&state.diffusion_loss);
     let (us, ue) = start_end(&state.upsampler_loss);
