@@ -972,8 +972,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 );
             }
             let config = Config::read(&recorded)?.with_overrides(&overrides).map_err(|e| Usage(e.into()))?;
-            let ext = edit::parse_vec3(&extent).ok_or_else(|| Usage(anyhow::anyhow!("--extent '{extent}': expected X,Y,Z")))?;
             let device = device(&dev)?;
+            let ext = edit::parse_vec3(&extent).ok_or_else(|| anyhow::anyhow!("--extent '{extent}': expected X,Y,Z"))?;
             let options = SampleOptions { first, extent: ext, stop_level, ..SampleOptions::from_config(&config, n, seed) };
             let _lock = lock::lock(&output, lock::Mode::Exclusive, cli.wait, "sample")?;
             let dirs = pipeline::sample_into(&dir, &models, &output, &config, device, &options, from.as_deref(), preview)?;
@@ -1033,7 +1033,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let names = pipeline::batch::output_names(&inputs)?;
             let report = pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
                 let target = if several { output.join(format!("{name}.{ext}")) } else { output.clone() };
-                let summary = pipeline::mesh_file(input, &target, method.method(), resolution, faces, preview.as_deref())
+                let summary = pipeline::mesh_file(input, &target, several, method.method(), resolution, faces, preview.as_deref())
                     .map_err(|e| e.to_string())?;
                 Ok((Some(target), summary))
             });
@@ -1044,7 +1044,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let names = pipeline::batch::output_names(&inputs)?;
             let report = pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {
                 let target = if several { output.join(format!("{name}.ply")) } else { output.clone() };
-                let count = pipeline::points_file(input, &target).map_err(|e| e.to_string())?;
+                let count = pipeline::points_file(input, &target, several).map_err(|e| e.to_string())?;
                 Ok((Some(target), count))
             });
             finish_batch(&report, "points", several.then_some(output.as_path()), batch.json)
@@ -1070,9 +1070,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 partition,
                 gpus_per_job,
             };
-            for line in pipeline::cluster::submit(&meshes, &output, &config, &opts, dry_run)? {
-                print!("{line}");
-            }
+            pipeline::cluster::submit(&meshes, &output, &config, &opts, dry_run, |line| print!("{line}"))?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Usd { dir, meters_per_unit, json } => {

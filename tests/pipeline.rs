@@ -72,6 +72,10 @@ fn training_lowers_the_loss_at_level_0_and_1() {
     assert_eq!((r1.upsampler_steps, r1.diffusion_steps), (60, 60));
     assert!(r1.upsampler_loss_end < 0.8 * r1.upsampler_loss_start, "upsampler: {r1:?}");
     assert!(r1.diffusion_loss_end < 0.8 * r1.diffusion_loss_start, "level 1: {r1:?}");
+    // The training stage draws each level's loss plot from its recorded state.
+    for k in 0..2 {
+        shapeshifter::pipeline::write_loss_plot(dir.path(), k, &config).unwrap();
+    }
     for f in ["level_0_diffusion.safetensors", "level_1_diffusion.safetensors", "level_1_upsampler.safetensors",
               "level_0_loss.png", "level_1_loss.png", "level_0_state.json", "level_1_state.json"] {
         assert!(dir.path().join(f).is_file(), "{f}");

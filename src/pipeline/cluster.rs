@@ -190,9 +190,9 @@ pub fn write_graph(dir: &Path, jobs: &[Job]) -> Result<PathBuf> {
 /// (it exists; several inputs need distinct names, one run folder
 /// `OUT/<stem>` each), then each exemplar's job graph written under
 /// `<run folder>/slurm` and submitted with its `submit.sh` (or only written,
-/// `dry_run`). Returns what to print: per exemplar, the submitter's output
-/// (job ids) or where the graph was written.
-pub fn submit(meshes: &[PathBuf], output: &Path, config: &Config, opts: &GraphOptions, dry_run: bool) -> Result<Vec<String>> {
+/// `dry_run`). `report` gets, per exemplar as soon as it is submitted, the
+/// submitter's output (job ids) or where the graph was written.
+pub fn submit(meshes: &[PathBuf], output: &Path, config: &Config, opts: &GraphOptions, dry_run: bool, mut report: impl FnMut(&str)) -> Result<()> {
     let several = meshes.len() > 1;
     let stem = |m: &Path| m.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let mut stems = std::collections::HashSet::new();
@@ -204,13 +204,12 @@ pub fn submit(meshes: &[PathBuf], output: &Path, config: &Config, opts: &GraphOp
             return Err(Error::file(m, format!("a second mesh named '{}': each exemplar needs its own run folder OUT/{}", stem(m), stem(m))));
         }
     }
-    let mut printed = Vec::new();
     for m in meshes {
         let out = if several { output.join(stem(m)) } else { output.to_path_buf() };
         let jobs = job_graph(m, &out, config, opts)?;
         let submit = write_graph(&out.join("slurm"), &jobs)?;
         if dry_run {
-            printed.push(format!("{}: {} jobs written, submit with {}\n", m.display(), jobs.len(), submit.display()));
+            report(&format!("{}: {} jobs written, submit with {}\n", m.display(), jobs.len(), submit.display()));
             continue;
         }
         let o = std::process::Command::new("bash")
@@ -223,9 +222,9 @@ pub fn submit(meshes: &[PathBuf], output: &Path, config: &Config, opts: &GraphOp
                 format!("submission failed: {}", String::from_utf8_lossy(&o.stderr).trim().replace('\n', " | ")),
             ));
         }
-        printed.push(String::from_utf8_lossy(&o.stdout).into_owned());
+        report(&String::from_utf8_lossy(&o.stdout));
     }
-    Ok(printed)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -229,11 +229,13 @@ pub struct MeshedSummary {
 
 /// The `mesh` command on one level file: meshed (`method`, or the one its
 /// exemplar's openness picks; `resolution` contouring cells), decimated to
-/// `faces` (0: not), written to `target` (.ply or .glb, colours kept), and
+/// `faces` (0: not), written to `target` (.ply or .glb, colours kept; its
+/// folder made first when `make_folder`, as a batch's output folder is), and
 /// its picture to `preview`.
 pub fn mesh_file(
     input: &Path,
     target: &Path,
+    make_folder: bool,
     method: Option<crate::recon::Method>,
     resolution: Option<u32>,
     faces: usize,
@@ -243,7 +245,7 @@ pub fn mesh_file(
     let named = |e: Error| Error::file(input, e.to_string());
     let (m, used) = mesh_level(&level, provenance.exemplar_open, method, resolution).map_err(named)?;
     let m = light_mesh(m, faces).map_err(named)?;
-    if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+    if let Some(dir) = target.parent().filter(|d| make_folder && !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     }
     crate::io::mesh::save(&m, target, true)?;
@@ -256,11 +258,12 @@ pub fn mesh_file(
 }
 
 /// The `points` command on one level file: its surface voxels as an
-/// oriented, coloured PLY point cloud at `target`. Returns the point count.
-pub fn points_file(input: &Path, target: &Path) -> Result<usize> {
+/// oriented, coloured PLY point cloud at `target` (its folder made first
+/// when `make_folder`). Returns the point count.
+pub fn points_file(input: &Path, target: &Path, make_folder: bool) -> Result<usize> {
     let (level, _) = vdb::read_level(input)?;
     let p = oriented_points(&level).map_err(|e| Error::file(input, e.to_string()))?;
-    if let Some(dir) = target.parent().filter(|d| !d.as_os_str().is_empty()) {
+    if let Some(dir) = target.parent().filter(|d| make_folder && !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     }
     crate::io::mesh::save_points_ply(target, &p.positions, &p.normals, &p.colours)?;

@@ -138,7 +138,23 @@ pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
             index,
         })
     };
-    let todo: Vec<usize> = indices.iter().zip(&dirs).filter(|(&i, d)| !is_done(d, StampOf::Sample, &key(i))).map(|(&i, _)| i).collect();
+    // A variant is done when its stamp holds this key and, where previews are
+    // asked for, each of its level files has its picture (a variant sampled
+    // without them is sampled again, as it was the first time).
+    let previewed = |d: &Path| {
+        !job.previews
+            || std::fs::read_dir(d).map_or(false, |entries| {
+                entries.flatten().all(|e| {
+                    let name = e.file_name().to_string_lossy().into_owned();
+                    match crate::level::files::parse(&name) {
+                        Some((k, crate::level::files::LevelFile::Volumes)) => d.join(crate::level::files::preview_file_name(k)).is_file(),
+                        _ => true,
+                    }
+                })
+            })
+    };
+    let todo: Vec<usize> =
+        indices.iter().zip(&dirs).filter(|(&i, d)| !(is_done(d, StampOf::Sample, &key(i)) && previewed(d))).map(|(&i, _)| i).collect();
     let reused = dirs.iter().zip(&indices).filter(|(d, i)| !todo.contains(i) && stamped_before_this_command(d, StampOf::Sample)).count();
     if reused > 0 {
         log::info!("sample: reusing {reused} variants in {}", job.variants_dir.display());
@@ -190,7 +206,6 @@ pub fn sample_into(
         Some(p) => Some((crate::io::vdb::read_level(p)?.0, dataset::file_sha256(p)?)),
         None => None,
     };
-    super::stamp::record_config(output, config)?;
     let dirs = sample_stage(&SampleJob {
         exemplar_levels: &levels,
         manifest: &manifest,
@@ -202,6 +217,7 @@ pub fn sample_into(
         from: from.as_ref().map(|(l, sha)| (l, sha.as_str())),
         previews,
     })?;
+    super::stamp::record_config(output, config)?;
     let resolutions: Vec<u32> = levels.iter().map(|l| l.resolution).collect();
     let finest = options.stop_level.unwrap_or(resolutions.len().saturating_sub(1));
     // A continuation writes only the levels after the one it started from.
