@@ -333,7 +333,7 @@ impl Config {
             }
         };
         let table: toml::Table =
-            toml::from_str(&text).map_err(|e| Error::Invalid(format!("profile '{profile}': {}", one_line(&e))))?;
+            toml::from_str(&text).map_err(|e| Error::Invalid(format!("profile '{profile}': {}", crate::error::one_line(&e.to_string()))))?;
         Self::from_table(table, overrides)
     }
 
@@ -368,7 +368,7 @@ impl Config {
         }
         let mut config: Config = toml::Value::Table(table)
             .try_into()
-            .map_err(|e: toml::de::Error| Error::Invalid(format!("configuration: {}", one_line(&e))))?;
+            .map_err(|e: toml::de::Error| Error::Invalid(format!("configuration: {}", crate::error::one_line(&e.to_string()))))?;
         config.normalise();
         config.validate()?;
         Ok(config)
@@ -377,7 +377,7 @@ impl Config {
     /// Reads a configuration recorded in an output folder.
     pub fn read(path: &std::path::Path) -> Result<Config> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
-        let mut c: Config = toml::from_str(&text).map_err(|e| Error::file(path, one_line(&e)))?;
+        let mut c: Config = toml::from_str(&text).map_err(|e| Error::file(path, crate::error::one_line(&e.to_string())))?;
         c.normalise();
         c.validate()?;
         Ok(c)
@@ -513,10 +513,6 @@ fn one() -> f64 {
 
 fn digest_str(s: &str) -> String {
     crate::util::digest::short(s)
-}
-
-fn one_line(e: &impl std::fmt::Display) -> String {
-    e.to_string().split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// `section.key=value`, value parsed as TOML (number, bool, string) or taken

@@ -119,7 +119,7 @@ where
             });
         let (output, result, error) = match r {
             Ok((o, v)) => (o, Some(v), None),
-            Err(e) => (None, None, Some(one_line(&e))),
+            Err(e) => (None, None, Some(crate::error::one_line(&e))),
         };
         Outcome { input: input.clone(), output, result, error, seconds: t.elapsed().as_secs_f64() }
     };
@@ -129,10 +129,6 @@ where
         Err(_) => inputs.iter().zip(names).map(one).collect(),
     };
     Report { outcomes, jobs, seconds: t0.elapsed().as_secs_f64() }
-}
-
-fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 #[cfg(test)]

@@ -401,7 +401,7 @@ mod tests {
 
     #[test]
     fn loss_plot_shows_lr_only_when_it_varies() {
-        use super::super::optim::lr_at;
+        use crate::learn::train::optim::lr_at;
         let up = noisy(400, 0.5, 0.02, 1);
         let diff = noisy(1000, 1.0, 0.1, 2);
         let none = render(1, PhaseCurve { loss: &up, lr: None }, PhaseCurve { loss: &diff, lr: None });
