@@ -124,9 +124,27 @@ impl Level {
 
     /// What every stage assumes of a level: a power-of-two resolution, one
     /// offset, normal, colour and mask per voxel, finite features, each voxel
-    /// once. The level files' reader and the networks' input check it; a
+    /// once. The level files' reader and writer check it (the networks' input its
+    /// shape, [`Level::check_shape`]); a
     /// level built field by field (tests, edits) can be checked here.
     pub fn check(&self) -> Result<(), InvalidLevel> {
+        self.check_shape()?;
+        if let Some(i) = self.first_non_finite() {
+            return Err(InvalidLevel(format!("voxel {} has NaN or infinite features", self.coords[i])));
+        }
+        let mut seen = crate::grid::VoxelMap::with_capacity(self.len());
+        for &c in &self.coords {
+            if seen.insert(c, ()).is_some() {
+                return Err(InvalidLevel(format!("voxel {c} appears more than once")));
+            }
+        }
+        Ok(())
+    }
+
+    /// The part of [`Level::check`] a consumer that checks each voxel itself
+    /// needs (the networks' sparse grid refuses repeated voxels as it sorts
+    /// them): a power-of-two resolution, one value of each channel per voxel.
+    pub fn check_shape(&self) -> Result<(), InvalidLevel> {
         if !self.resolution.is_power_of_two() {
             return Err(InvalidLevel(format!("resolution {} is not a power of two", self.resolution)));
         }
@@ -137,15 +155,6 @@ impl Level {
                 "level {} has {n} voxels but {} offsets, {} normals, {} colours, {} mask values",
                 self.index, lengths[0], lengths[1], lengths[2], lengths[3]
             )));
-        }
-        if let Some(i) = self.first_non_finite() {
-            return Err(InvalidLevel(format!("voxel {} has NaN or infinite features", self.coords[i])));
-        }
-        let mut seen = crate::grid::VoxelMap::with_capacity(n);
-        for &c in &self.coords {
-            if seen.insert(c, ()).is_some() {
-                return Err(InvalidLevel(format!("voxel {c} appears more than once")));
-            }
         }
         Ok(())
     }

@@ -112,8 +112,8 @@ pub struct SampleJob<'a> {
 /// the level it continued from, and its index.
 #[derive(serde::Serialize)]
 struct VariantInputs<'a> {
-    settings: String,
-    models: String,
+    settings: &'a str,
+    models: &'a str,
     options: SampleOptions,
     from: Option<&'a str>,
     index: usize,
@@ -129,10 +129,11 @@ pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
     let indices: Vec<usize> = (options.first..options.first + options.n).collect();
     let dirs: Vec<PathBuf> = indices.iter().map(|&i| variant_dir(job.variants_dir, i)).collect();
     let models_state = std::fs::read_to_string(train::state_path(job.models_dir, trained_levels(config, levels) - 1)).unwrap_or_default();
+    let (settings, models_digest) = (config.stage_digest(Stage::Sample), crate::util::digest::short(&models_state));
     let key = |index: usize| {
         digest_of(&VariantInputs {
-            settings: config.stage_digest(Stage::Sample),
-            models: crate::util::digest::short(&models_state),
+            settings: &settings,
+            models: &models_digest,
             options: SampleOptions { first: 0, n: 0, ..options.clone() },
             from: job.from.map(|(_, sha)| sha),
             index,

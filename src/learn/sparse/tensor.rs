@@ -122,7 +122,7 @@ impl SparseTensor {
     /// colours scaled to `2 * (2c - 1)`; rows sorted like the grid.
     pub fn from_level(level: &Level, device: Device) -> Result<Self> {
         let n = level.len();
-        if let Err(e) = level.check() {
+        if let Err(e) = level.check_shape() {
             return invalid(e.to_string());
         }
         let (grid, order) = SparseGrid::from_unique_coords(level.resolution, &level.coords)?;
