@@ -3,6 +3,9 @@
 #   make test   set up, build, and run the whole test suite
 # Everything else is a helper. CUDA=1 builds the GPU variant.
 
+# cargo from rustup (make setup installs it there on a bare machine).
+export PATH := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin:$(PATH)
+
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 

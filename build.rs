@@ -49,11 +49,24 @@ fn main() {
     for lib in ["openvdb", "tbb", "Imath-3_1", "OpenMeshCore", "OpenMeshTools", "mpfr", "gmp", "blosc"] {
         println!("cargo:rustc-link-lib={lib}");
     }
-    // The .vdb probe program uses only cpp/vdb_guard.cpp, through a C entry
-    // point and not the library crate, so it links neither libtorch (whose
-    // start-up alone costs about 0.25 s per process) nor the bridge.
+    // The .vdb probe program uses only cpp/vdb_guard.cpp and its own
+    // cpp/vdb_probe_main.cpp (the C entry point and the allocation cap's
+    // operator new, which no other program links), not the library crate, so
+    // it links neither libtorch (whose start-up alone costs about 0.25 s per
+    // process) nor the bridge.
     let out_dir = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
-    for arg in [format!("-L{out_dir}"), "-lshapeshifter_cpp".into(), "-lopenvdb".into(), "-ltbb".into(), "-lImath-3_1".into(), "-lblosc".into(), "-lstdc++".into()] {
+    cc::Build::new()
+        .cpp(true)
+        .file("cpp/vdb_probe_main.cpp")
+        .include(Path::new(&out_dir).join("cxxbridge/crate"))
+        .std("c++17")
+        .opt_level(2)
+        .debug(false)
+        .define("NDEBUG", None)
+        .flag_if_supported("-Wno-deprecated-declarations")
+        .cargo_metadata(false)
+        .compile("shapeshifter_probe");
+    for arg in [format!("-L{out_dir}"), "-lshapeshifter_probe".into(), "-lshapeshifter_cpp".into(), "-lopenvdb".into(), "-ltbb".into(), "-lImath-3_1".into(), "-lblosc".into(), "-lstdc++".into()] {
         println!("cargo:rustc-link-arg-bin=shapeshifter-vdb-probe={arg}");
     }
     // Assimp (FBX, COLLADA, ...) only in its converter program, a static

@@ -53,5 +53,9 @@ extern "C" int shapeshifter_assimp_convert(const char *in, const char *out, char
   } catch (const std::exception &e) {
     say(message, message_len, std::string("Assimp failed on it: ") + e.what());
     return 1;
+  } catch (...) {
+    // Nothing may unwind into Rust (undefined behaviour across extern "C").
+    say(message, message_len, "Assimp failed on it with an unknown C++ exception");
+    return 1;
   }
 }

@@ -1,11 +1,10 @@
 // @brief Reading .vdb files under a budget, with no Rust types: shared by the
 // bridge's readers (vdb_io.cpp) and the probe program
-// (src/bin/shapeshifter-vdb-probe.rs, through `shapeshifter_probe_vdb`).
+// (src/bin/shapeshifter-vdb-probe.rs, through cpp/vdb_probe_main.cpp).
 #include "shapeshifter/cpp/vdb_guard.h"
 
 #include <openvdb/io/File.h>
 #include <openvdb/io/GridDescriptor.h>
-#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -15,44 +14,12 @@
 #include <stdexcept>
 #include <vector>
 
-// Reading a damaged level file under a budget.
-//
-// Why: OpenVDB trusts the sizes a file declares. `readString` (grid names and
-// types in the grid descriptors, metadata names) and the string and unknown
-// metadata readers allocate and fill a declared 32-bit length before reading
-// it; a damaged type-name length in a 182 KB file cost 5-6 GB and 6-11 s before
-// failing (and the "unknown grid type" error then copied the name again).
-//
-// How: while OpenVDB parses, no single allocation on this thread may exceed the
-// cap below (a replaceable operator new that checks a thread-local limit, zero
-// everywhere else), so a declared length cannot allocate more than the file
-// could hold; the bad_alloc becomes a one-line error. (Parsing from a memory
-// stream that throws at its end, which would also stop OpenVDB's loops over
-// declared counts at the end of the bytes, was tried and dropped: OpenVDB's
-// readers are not exception-safe mid-node, and 5 of 150 damaged files then
-// ended in "double free or corruption".)
+// The allocation cap (why and how: cpp/vdb_probe_main.cpp) is enforced only
+// in the probe program, which replaces the global operator new; this file
+// sets it around every parse, where it is a no-op in any other process.
 namespace shapeshifter {
-thread_local std::size_t g_allocation_cap = 0; // 0: no cap (every other caller)
+thread_local std::size_t g_allocation_cap = 0; // 0: no cap
 } // namespace shapeshifter
-
-// The replaceable global allocation functions (the C++ standard lets a program
-// define them once); identical to the library's except for the cap check.
-void *operator new(std::size_t n) {
-  const std::size_t cap = shapeshifter::g_allocation_cap;
-  if (cap != 0 && n > cap) throw std::bad_alloc();
-  if (n == 0) n = 1;
-  for (;;) {
-    if (void *p = std::malloc(n)) return p;
-    std::new_handler handler = std::get_new_handler();
-    if (!handler) throw std::bad_alloc();
-    handler();
-  }
-}
-void *operator new[](std::size_t n) { return ::operator new(n); }
-void operator delete(void *p) noexcept { std::free(p); }
-void operator delete[](void *p) noexcept { std::free(p); }
-void operator delete(void *p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void *p, std::size_t) noexcept { std::free(p); }
 
 namespace shapeshifter {
 namespace {
@@ -149,20 +116,3 @@ void parse_grids(const std::string &file_name, const std::vector<std::string> &n
   });
 }
 } // namespace shapeshifter
-
-extern "C" int shapeshifter_probe_vdb(const char *path, const char *const *names, size_t count,
-                                      char *message, size_t message_len) {
-  // One thread: the probe is a process of its own and needs no more.
-  tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
-  try {
-    std::vector<std::string> grids(names, names + count);
-    shapeshifter::parse_grids(path, grids);
-    return 0;
-  } catch (const std::exception &e) {
-    if (message_len > 0) {
-      std::strncpy(message, e.what(), message_len - 1);
-      message[message_len - 1] = 0;
-    }
-    return 1;
-  }
-}

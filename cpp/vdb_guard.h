@@ -28,8 +28,9 @@ inline std::mutex &vdb_file_mutex() {
   return m;
 }
 
-// While non-zero, no single allocation on this thread may exceed it (the
-// replaceable operator new in vdb_guard.cpp checks it).
+// While non-zero, no single allocation on this thread may exceed it. Only
+// the probe program enforces it (its replaceable operator new, in
+// cpp/vdb_probe_main.cpp); in the library's process it is set and unused.
 extern thread_local std::size_t g_allocation_cap;
 
 // The cap for a file of `len` bytes: a legitimate read allocates blocks no
@@ -71,7 +72,8 @@ template <typename F> auto read_capped(const std::string &path, F read) -> declt
 void parse_grids(const std::string &file_name, const std::vector<std::string> &names);
 } // namespace shapeshifter
 
-// The probe program's entry: parses as `parse_grids`; 0, or 1 with the error
-// in `message` (NUL-terminated, cut to `message_len`).
+// The probe program's entry (cpp/vdb_probe_main.cpp, linked into that program
+// only): parses as `parse_grids`; 0, or 1 with the error in `message`
+// (NUL-terminated, cut to `message_len`). Never throws.
 extern "C" int shapeshifter_probe_vdb(const char *path, const char *const *names, size_t count,
                                       char *message, size_t message_len);

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use shapeshifter::config::Config;
 use shapeshifter::io::vdb::{self, Provenance, WriteOptions};
 use shapeshifter::learn::sample::{load_models, SampleOptions};
-use shapeshifter::level::dataset;
+use shapeshifter::io::dataset;
 use shapeshifter::pipeline::{models_needed, sample_variants, RunPaths};
 
 fn main() -> anyhow::Result<()> {

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One idempotent set-up for a fresh Debian 12 machine: Debian packages
-# (OpenVDB 10, OpenMesh 9, CGAL 5.5, ccache, the DejaVu font that build.rs
-# embeds for the loss plots' text, ...) and libtorch 2.13.0 for
+# (g++, OpenVDB 10, OpenMesh 9, CGAL 5.5, ccache, the DejaVu font that build.rs
+# embeds for the loss plots' text, ...), the pinned Rust (rustup) and libtorch 2.13.0 for
 # tch 0.26 from the PyPI torch wheel, cached OUTSIDE the work tree so that
 # clones and CI reuse it. A second run with everything present downloads
 # nothing and takes about a second.
@@ -9,9 +9,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-PACKAGES=(libopenvdb-dev libopenvdb-tools python3-openvdb libopenmesh-dev libcgal-dev
-  libeigen3-dev libgmp-dev libmpfr-dev libtbb-dev libblosc-dev ccache pkg-config
-  python3-venv fonts-dejavu-core libassimp-dev assimp-testmodels)
+# The C++ compiler, make and curl too: a bare Debian 12 has none of them.
+PACKAGES=(g++ make curl ca-certificates git libopenvdb-dev libopenvdb-tools python3-openvdb
+  libopenmesh-dev libcgal-dev libeigen3-dev libgmp-dev libmpfr-dev libtbb-dev libblosc-dev
+  ccache pkg-config python3-venv fonts-dejavu-core libassimp-dev assimp-testmodels)
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -21,6 +22,24 @@ if ((${#missing[@]})); then
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
   $SUDO apt-get update -q
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q "${missing[@]}"
+fi
+
+# Rust: the version rust-toolchain.toml pins, through rustup (Debian 12's
+# rustc 1.63 is too old). An existing rustup only adds the toolchain if it is
+# missing; without rustup, rustup-init comes from static.rust-lang.org.
+RUST_VERSION=$(sed -n 's/^channel *= *"\(.*\)"/\1/p' rust-toolchain.toml)
+export PATH="${CARGO_HOME:-$HOME/.cargo}/bin:$PATH"
+if ! command -v rustup >/dev/null 2>&1; then
+  echo "setup: installing rustup and Rust $RUST_VERSION into ${CARGO_HOME:-$HOME/.cargo}" >&2
+  init=$(mktemp)
+  curl --proto '=https' --tlsv1.2 -sSf -o "$init" \
+    "https://static.rust-lang.org/rustup/dist/$(uname -m)-unknown-linux-gnu/rustup-init"
+  chmod +x "$init"
+  "$init" -y -q --profile minimal --default-toolchain "$RUST_VERSION" --no-modify-path
+  rm -f "$init"
+elif ! rustup run "$RUST_VERSION" rustc --version >/dev/null 2>&1; then
+  echo "setup: installing Rust $RUST_VERSION (rustup)" >&2
+  rustup toolchain install "$RUST_VERSION" --profile minimal
 fi
 
 CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
@@ -41,4 +60,4 @@ if [ ! -f "$VENV/.complete" ]; then
 fi
 TORCH_PY_DIR=$(ls -d "$VENV"/lib/python3*/site-packages/torch | head -n1)
 ln -sfn "$TORCH_PY_DIR" .libtorch
-echo "setup: ready (libtorch at $(readlink .libtorch))" >&2
+echo "setup: ready (Rust $RUST_VERSION, libtorch at $(readlink .libtorch))" >&2

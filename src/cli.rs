@@ -33,8 +33,21 @@ pub struct Cli {
     /// to end instead of failing at once.
     #[arg(long, global = true)]
     pub wait: bool,
+    /// How progress is shown on stderr: bars (interactive), alf
+    /// (`ALF_PROGRESS nn%` lines, as Houdini PDG and other task-graph
+    /// schedulers parse them) or none.
+    #[arg(long, global = true, value_enum, default_value_t = ProgressMode::Bars)]
+    pub progress: ProgressMode,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// `--progress`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProgressMode {
+    Bars,
+    Alf,
+    None,
 }
 
 #[derive(Subcommand, Debug)]
@@ -172,9 +185,10 @@ pub enum Command {
         first: usize,
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Per-axis scale of the coarse grid: X,Y,Z (2,1,1 = twice as long in x).
-        #[arg(long, default_value = "1,1,1")]
-        extent: String,
+        /// Per-axis scale of the coarse grid: X,Y,Z (2,1,1 = twice as long in x;
+        /// the box may hold at most 64 level-0 grids, e.g. 4,4,4 or 16,4,1).
+        #[arg(long, default_value = "1,1,1", value_parser = parse_extent)]
+        extent: Extent,
         /// Stop after this level.
         #[arg(long)]
         stop_level: Option<usize>,
@@ -659,53 +673,22 @@ fn device(spec: &str) -> Result<tch::Device> {
     Ok(device)
 }
 
-/// A command line the program refuses before any work (a bad `--set`, an
-/// unknown profile): exit status 2, as for clap's own usage errors.
-#[derive(Debug)]
-pub struct Usage(pub anyhow::Error);
+/// `--extent X,Y,Z`: three positive scales (a bad one is a usage error, exit 2).
+#[derive(Clone, Copy, Debug)]
+pub struct Extent(pub [f32; 3]);
 
-impl std::fmt::Display for Usage {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let msg: Vec<String> = self.0.chain().map(|c| c.to_string()).collect();
-        f.write_str(&msg.join(": "))
+fn parse_extent(text: &str) -> std::result::Result<Extent, String> {
+    match edit::parse_vec3(text) {
+        Some(v) if v.iter().all(|e| e.is_finite() && *e > 0.0) => Ok(Extent(v)),
+        Some(_) => Err("each scale must be a positive number".into()),
+        None => Err("expected three numbers X,Y,Z (e.g. 2,1,1)".into()),
     }
 }
 
-impl std::error::Error for Usage {}
-
-/// The configuration a command line asks for, or a [`Usage`] error.
+/// The configuration a command line asks for (a bad profile or `--set` is
+/// a usage error, exit 2).
 fn load_config(profile: &str, overrides: &[String]) -> Result<Config> {
-    Config::load(profile, overrides).map_err(|e| Usage(e.into()).into())
-}
-
-/// One exemplar through the whole pipeline into `out` ([`pipeline::run::run`]).
-fn run_one(
-    exemplar: pipeline::ExemplarSource,
-    out: &std::path::Path,
-    args: &RunArgs,
-    quiet: bool,
-    threads: i32,
-    wait: bool,
-) -> Result<pipeline::run::RunSummary> {
-    // The demo's own profile (sized for its 10-minute budget) unless one is given.
-    let default = if matches!(exemplar, pipeline::ExemplarSource::Demo) { "demo" } else { "cpu" };
-    let mut config = load_config(args.setup.profile(default), &args.setup.overrides)?;
-    args.exemplar.apply(&mut config.encode);
-    pipeline::encode_options(&config).validate().map_err(|e| Usage(shapeshifter::Error::from(e).into()))?;
-    let _lock = lock::lock(out, lock::Mode::Exclusive, wait, "run")?;
-    let device = device(&args.setup.device)?;
-    let options = pipeline::run::RunOptions {
-        config,
-        device,
-        device_spec: args.setup.device.clone(),
-        n: args.n,
-        seed: args.seed,
-        jobs: args.jobs,
-        threads,
-        progress: !quiet && !args.json,
-        exe: std::env::current_exe()?,
-    };
-    Ok(pipeline::run::run(exemplar, out, &options)?)
+    Ok(Config::load(profile, overrides)?)
 }
 
 /// `run`'s summary: where everything went, the stage times, the scores.
@@ -731,38 +714,43 @@ fn print_run_summary(summary: &pipeline::run::RunSummary, out: &std::path::Path)
     }
 }
 
-/// Runs exemplars one after the other, each into its folder; prints each
-/// one's summary (or JSON record) as it finishes. A failed exemplar is one
-/// error line (and a failed record) and the next goes on; a stop signal or a
-/// usage error ends the command. Exit status 1 when any failed.
-fn run_many(exemplars: &[(pipeline::ExemplarSource, String, PathBuf)], args: &RunArgs, quiet: bool, threads: i32, wait: bool) -> Result<ExitCode> {
-    let mut failed = 0;
-    for (source, name, out) in exemplars {
-        let t = std::time::Instant::now();
-        match run_one(*source, out, args, quiet, threads, wait) {
+/// `run` and `demo`: each exemplar's summary (or JSON record) printed as
+/// it finishes ([`pipeline::run::run_batch`]). Exit status 1 when any failed.
+fn run_many(exemplars: &[(pipeline::ExemplarSource, String, PathBuf)], args: &RunArgs, no_bars: bool, threads: i32, wait: bool) -> Result<ExitCode> {
+    let apply = |c: &mut shapeshifter::config::EncodeConfig| args.exemplar.apply(c);
+    let request = pipeline::run::RunRequest {
+        profile: args.setup.profile.as_deref(),
+        overrides: &args.setup.overrides,
+        exemplar: &apply,
+        device_spec: &args.setup.device,
+        n: args.n,
+        seed: args.seed,
+        jobs: args.jobs,
+        threads,
+        progress: !no_bars && !args.json,
+        wait,
+    };
+    let failed = pipeline::run::run_batch(exemplars, &request, |name, out, outcome, seconds| {
+        match outcome {
             Ok(summary) if args.json => {
-                println!("{}", serde_json::to_string(&pipeline::run::RunRecord::done(name, out, &summary))?);
+                println!("{}", json_line(&pipeline::run::RunRecord::done(name, out, summary)));
             }
-            Ok(summary) => print_run_summary(&summary, out),
+            Ok(summary) => print_run_summary(summary, out),
             Err(e) => {
-                if shapeshifter::util::interrupt::requested().is_some() || e.downcast_ref::<Usage>().is_some() {
-                    return Err(e);
-                }
-                let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-                eprintln!("error: {}", msg.join(": "));
+                eprintln!("error: {e}");
                 if args.json {
-                    let record = pipeline::run::RunRecord::failed(name, out, msg.join(": "), t.elapsed().as_secs_f64());
-                    println!("{}", serde_json::to_string(&record)?);
+                    let record = pipeline::run::RunRecord::failed(name, out, e.to_string(), seconds);
+                    println!("{}", json_line(&record));
                 }
-                failed += 1;
             }
         }
-    }
-    if failed > 0 {
-        log::error!("{failed} of {} inputs failed", exemplars.len());
-        return Ok(ExitCode::FAILURE);
-    }
-    Ok(ExitCode::SUCCESS)
+    })?;
+    Ok(if failed > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+}
+
+/// A record as one line of JSON (records are plain data: they serialise).
+fn json_line<T: serde::Serialize>(record: &T) -> String {
+    serde_json::to_string(record).expect("a record serialises")
 }
 
 /// Reports a batch: JSON on request; else one line per input (its output, or
@@ -792,7 +780,7 @@ fn finish_batch<T: serde::Serialize>(
 }
 
 /// One stage of `run` (see [`Command::Stage`]).
-fn run_stage(stage: StageCmd, quiet: bool, wait: bool) -> Result<()> {
+fn run_stage(stage: StageCmd, no_bars: bool, wait: bool) -> Result<()> {
     let recorded = |dir: &std::path::Path| pipeline::RunPaths::new(dir).read_config();
     // Stages share their folder: a cluster's array tasks write one folder by design.
     let folder = match &stage {
@@ -816,7 +804,7 @@ fn run_stage(stage: StageCmd, quiet: bool, wait: bool) -> Result<()> {
         }
         StageCmd::Train { dir, level, device: dev } => {
             let config = recorded(&dir)?;
-            let reports = pipeline::run_train(&pipeline::RunPaths::new(&dir), &config, device(&dev)?, level, !quiet)?;
+            let reports = pipeline::run_train(&pipeline::RunPaths::new(&dir), &config, device(&dev)?, level, !no_bars)?;
             for r in &reports {
                 println!(
                     "level {}: {} upsampler + {} diffusion steps, {:.0} s{}",
@@ -851,7 +839,18 @@ fn run_stage(stage: StageCmd, quiet: bool, wait: bool) -> Result<()> {
 }
 
 pub fn run(cli: Cli) -> Result<ExitCode> {
-    let quiet = cli.quiet;
+    // How a panic ends the command (one line, exit 1) is checked by the tests
+    // through this variable: on this thread, or on a worker thread.
+    match std::env::var("SHAPESHIFTER_TEST_PANIC").as_deref() {
+        Ok("main") => panic!("a test panic on the main thread"),
+        Ok("worker") => rayon::scope(|s| s.spawn(|_| panic!("a test panic on a worker thread"))),
+        _ => {}
+    }
+    if cli.progress == ProgressMode::Alf {
+        shapeshifter::util::progress::enable_alf();
+    }
+    // No progress bars with --quiet, or with ALF lines (or none) instead.
+    let no_bars = cli.quiet || cli.progress != ProgressMode::Bars;
     if cli.threads > 0 {
         tch::set_num_threads(cli.threads);
     }
@@ -875,14 +874,9 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(if report.failed() > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
         Command::Encode { meshes, output, sampling_resolution, coarsest, finest, pooling, preview, points, view, exemplar, batch } => {
-            let mut config = Config::load("cpu", &[])?;
-            config.encode.sampling_resolution = sampling_resolution;
-            config.encode.coarsest_resolution = coarsest;
-            config.encode.finest_resolution = finest;
-            config.encode.pooling = pooling;
-            exemplar.apply(&mut config.encode);
-            let options = pipeline::encode_options(&config);
-            options.validate().map_err(shapeshifter::Error::from)?;
+            let mut settings = shapeshifter::config::EncodeConfig::grids(sampling_resolution, coarsest, finest, pooling);
+            exemplar.apply(&mut settings);
+            let options = pipeline::encode::command_options(&settings)?;
             let previews = preview.then(|| view.options());
             let write = vdb::WriteOptions { points, ..Default::default() };
             let names = shapeshifter::pipeline::batch::output_names(&meshes)?;
@@ -904,7 +898,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     edit::Edit::Copy(edit::VoxelBox::parse(&region)?, to)
                 }
             };
-            log::info!("{}", edit::edit_file(&input, &output, edit)?);
+            log::info!("{}", pipeline::edit_file(&input, &output, edit)?);
             Ok(ExitCode::SUCCESS)
         }
         Command::Eval { exemplar, variants, exemplar_mesh, resolution, output, json } => {
@@ -941,7 +935,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     device_spec: &setup.device,
                     overrides: &setup.overrides,
                 },
-                progress: !quiet,
+                progress: !no_bars,
                 wait: cli.wait,
             })?;
             match trained {
@@ -961,59 +955,34 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Sample { dir, output, models, n, first, seed, extent, stop_level, from, preview, overrides, device: dev, json } => {
-            let t = std::time::Instant::now();
-            let models = models.unwrap_or_else(|| dir.join(pipeline::layout::MODELS_DIR));
-            let recorded = models.join(pipeline::layout::CONFIG);
-            if !recorded.is_file() {
-                anyhow::bail!(
-                    "{}: no trained models here (no config.toml): train first (`shapeshifter train {}`), or give --models",
-                    models.display(),
-                    dir.display()
-                );
-            }
-            let config = Config::read(&recorded)?.with_overrides(&overrides).map_err(|e| Usage(e.into()))?;
-            let device = device(&dev)?;
-            let ext = edit::parse_vec3(&extent).ok_or_else(|| anyhow::anyhow!("--extent '{extent}': expected X,Y,Z"))?;
-            let options = SampleOptions { first, extent: ext, stop_level, ..SampleOptions::from_config(&config, n, seed) };
-            let _lock = lock::lock(&output, lock::Mode::Exclusive, cli.wait, "sample")?;
-            let dirs = pipeline::sample_into(&dir, &models, &output, &config, device, &options, from.as_deref(), preview)?;
+            let request = pipeline::sample::SampleRequest {
+                models: models.as_deref(),
+                n,
+                first,
+                seed,
+                extent: extent.0,
+                stop_level,
+                from: from.as_deref(),
+                previews: preview,
+                overrides: &overrides,
+                device_spec: &dev,
+                wait: cli.wait,
+            };
+            let record = pipeline::sample::sample_command(&dir, &output, &request)?;
             if json {
-                let files: Vec<_> = dirs.iter().flat_map(|d| pipeline::layout::output_files(d)).collect();
-                let record = serde_json::json!({
-                    "models": models,
-                    "output": output,
-                    "status": "done",
-                    "exit_status": 0,
-                    "variants": dirs.len(),
-                    "first": first,
-                    "seed": seed,
-                    "seconds": t.elapsed().as_secs_f64(),
-                    "files": files,
-                });
                 println!("{}", serde_json::to_string(&record)?);
             } else {
-                println!("{} variants -> {}", dirs.len(), output.display());
+                println!("{} variants -> {}", record.variants, output.display());
             }
             Ok(ExitCode::SUCCESS)
         }
         Command::Run { meshes, output, run } => {
-            let several = meshes.len() > 1;
-            // One folder per input, named as the batch commands name them
-            // (a/x.off and b/x.off become a_x and b_x, never one folder).
-            let names = pipeline::batch::output_names(&meshes)?;
-            let exemplars: Vec<_> = meshes
-                .iter()
-                .zip(&names)
-                .map(|(m, name)| {
-                    let out = if several { output.join(name) } else { output.clone() };
-                    (pipeline::ExemplarSource::File(m), m.display().to_string(), out)
-                })
-                .collect();
-            run_many(&exemplars, &run, quiet, cli.threads, cli.wait)
+            let exemplars = pipeline::run::batch_of(&meshes, &output)?;
+            run_many(&exemplars, &run, no_bars, cli.threads, cli.wait)
         }
         Command::Demo { output, run } => {
             let exemplars = [(pipeline::ExemplarSource::Demo, "(embedded)".to_string(), output)];
-            run_many(&exemplars, &run, quiet, cli.threads, cli.wait)
+            run_many(&exemplars, &run, no_bars, cli.threads, cli.wait)
         }
         Command::Mesh { inputs, output, format, method, resolution, depth, faces, preview, batch } => {
             let resolution = resolution.or(depth.map(|d| 1 << d));
@@ -1056,7 +1025,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Stage { stage } => {
-            run_stage(stage, quiet, cli.wait)?;
+            run_stage(stage, no_bars, cli.wait)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Slurm { meshes, output, n, seed, profile, overrides, partition, gpus_per_job, dry_run } => {
@@ -1083,7 +1052,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let _lock = lock::lock(&dir, lock::Mode::Exclusive, cli.wait, "usd")?;
             let mpu = meters_per_unit.unwrap_or(config.output.meters_per_unit);
             if !(mpu.is_finite() && mpu > 0.0) {
-                return Err(Usage(anyhow::anyhow!("--meters-per-unit {mpu}: expected a positive number")).into());
+                return Err(shapeshifter::Error::Usage(format!("--meters-per-unit {mpu}: expected a positive number")).into());
             }
             let outcome = pipeline::run_usd(&paths, None, mpu)?;
             if json {
@@ -1094,7 +1063,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Compare { a, b } => {
-            let report = shapeshifter::level::dataset::compare_levels(&a, &b)?;
+            let report = shapeshifter::io::dataset::compare_levels(&a, &b)?;
             println!("{} level files compared: {} identical", report.compared, report.compared - report.differences.len());
             for d in &report.differences {
                 println!("  differs: {d}");

@@ -188,6 +188,25 @@ pub struct EncodeConfig {
     pub estimate_normals: bool,
 }
 
+impl EncodeConfig {
+    /// The grid settings given, every other setting at its default (the
+    /// `encode` command's configuration: no profile).
+    pub fn grids(sampling_resolution: u32, coarsest_resolution: u32, finest_resolution: u32, pooling: crate::encode::Pooling) -> Self {
+        EncodeConfig {
+            sampling_resolution,
+            coarsest_resolution,
+            finest_resolution,
+            pooling,
+            voxel_size: None,
+            up: None,
+            cloud_colour: Default::default(),
+            normal_neighbours: default_normal_neighbours(),
+            normal_orientation: Default::default(),
+            estimate_normals: false,
+        }
+    }
+}
+
 fn is_default<T: Default + PartialEq>(v: &T) -> bool {
     *v == T::default()
 }
@@ -316,8 +335,14 @@ fn section_toml<T: Serialize>(section: &T) -> String {
 }
 
 impl Config {
-    /// A shipped profile by name, or a TOML file by path, with overrides.
+    /// A shipped profile by name, or a TOML file by path, with overrides. A
+    /// profile or override that does not load is a usage error
+    /// ([`Error::Usage`]: the command line asked for it).
     pub fn load(profile: &str, overrides: &[String]) -> Result<Config> {
+        Self::load_profile(profile, overrides).map_err(Error::usage)
+    }
+
+    fn load_profile(profile: &str, overrides: &[String]) -> Result<Config> {
         let text = match PROFILES.iter().find(|(n, _)| *n == profile) {
             Some((_, t)) => t.to_string(),
             None => {
@@ -339,9 +364,10 @@ impl Config {
 
     /// This configuration with `overrides` applied (e.g. sampling settings on
     /// top of the configuration recorded at training time).
+    /// A bad override is a usage error.
     pub fn with_overrides(&self, overrides: &[String]) -> Result<Config> {
         let table: toml::Table = toml::from_str(&self.to_toml()).expect("a config reads back");
-        Self::from_table(table, overrides)
+        Self::from_table(table, overrides).map_err(Error::usage)
     }
 
     fn from_table(mut table: toml::Table, overrides: &[String]) -> Result<Config> {

@@ -8,6 +8,11 @@ pub enum Error {
     File { path: PathBuf, message: String },
     #[error("{0}")]
     Invalid(String),
+    /// A setting the user gave is invalid (a profile, a `--set`, an encoding
+    /// setting, a command-line value such as `--extent`), found before any
+    /// work: the command exits 2, as for clap's own usage errors.
+    #[error("{0}")]
+    Usage(String),
     /// A stop signal arrived (util::interrupt); what is on disk is whole and
     /// the same command resumes.
     #[error("stopped by {0}: what is on disk is whole; run the same command again to resume")]
@@ -36,6 +41,11 @@ impl Error {
     /// and the error must stay the one line the command line promises.
     pub fn file(path: &Path, message: impl Into<String>) -> Self {
         Error::File { path: path.to_path_buf(), message: one_line(&message.into()) }
+    }
+
+    /// A usage error ([`Error::Usage`]) with the message of `e`.
+    pub fn usage(e: impl std::fmt::Display) -> Self {
+        Error::Usage(one_line(&e.to_string()))
     }
 }
 

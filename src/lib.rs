@@ -38,7 +38,10 @@ pub mod pipeline;
 pub mod recon;
 pub mod render;
 pub mod transfer;
-#[cfg(any(test, feature = "testing"))]
+// Fixtures (shapes with known answers, synthetic levels) for the tests,
+// benchmarks and tools. Always compiled, so that `cargo build` and `cargo
+// test` build the library (and its C++) once, with one feature set.
+#[doc(hidden)]
 pub mod testing;
 pub mod util;
 

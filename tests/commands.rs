@@ -1,14 +1,13 @@
 //! The encode, render and edit commands as a user runs them: outputs, and
 //! clean failures that leave nothing behind.
 
-mod common;
-#[path = "common/hostile.rs"]
-mod hostile;
+use crate::common;
+use crate::hostile_harness as hostile;
 
 use common::*;
 use hostile::sphere_level;
 use std::path::Path;
-use shapeshifter::{level::dataset, encode::exemplar, io::mesh, io::vdb};
+use shapeshifter::{io::dataset, encode::exemplar, io::mesh, io::vdb};
 
 /// Writes the small demo tower as a PLY in `dir`.
 fn small_tower_ply(dir: &std::path::Path) -> std::path::PathBuf {

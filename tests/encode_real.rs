@@ -9,7 +9,7 @@ use shapeshifter::level::Level;
 use shapeshifter::io::mesh::{self, Mesh};
 use glam::{DVec3, Vec3};
 
-mod common;
+use crate::common;
 use common::shared_data;
 
 fn sharp_corners(mesh: &Mesh) -> Vec<usize> {

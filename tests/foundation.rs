@@ -1,7 +1,7 @@
 //! Issue 2: mesh and level-file I/O, OpenVDB's own tools reading our files,
 //! `info`, and one clean error per bad input.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

@@ -2,9 +2,8 @@
 //! line, never a signal, a runaway or a leftover output (docs/hostile-files.md). The harness is tests/common/hostile.rs; longer campaigns:
 //! `cargo run --release --example hostile_campaign`.
 
-#[path = "common/hostile.rs"]
-mod hostile;
-mod common;
+use crate::hostile_harness as hostile;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -13,7 +13,7 @@ use shapeshifter::io::exemplar::Exemplar;
 use shapeshifter::io::{mesh, vdb};
 use shapeshifter::level::Up;
 
-mod common;
+use crate::common;
 use common::{assert_clean_failure, shapeshifter, skip, stdout};
 
 /// Debian's assimp-testmodels glTF 2.0 folder (`make test`'s setup installs it).
@@ -271,7 +271,7 @@ fn our_points_ply_encodes_to_the_level_it_came_from() {
     let m = shapeshifter::testing::shapes::uv_sphere(Vec3::ZERO, 40, 80, |_, _| 1.0);
     let (levels, _) = shapeshifter::encode::encode(&m, &small()).unwrap();
     let level = levels.last().unwrap();
-    let pts = shapeshifter::geom::points::OrientedPoints::from_level(level);
+    let pts = shapeshifter::level::Level::surface_points(level);
     let ply = dir.path().join("p.ply");
     mesh::save_points_ply(&ply, &pts.positions, &pts.normals, &pts.colours).unwrap();
     let Exemplar::Cloud(cloud) = Exemplar::load(&ply).unwrap() else { panic!("a PLY of points is a cloud") };

@@ -3,7 +3,7 @@
 //! the literature's precision-only scores are shown not to, and the
 //! `ladder` and contact-sheet commands work as a user runs them.
 
-mod common;
+use crate::common;
 
 use common::*;
 use shapeshifter::config::Config;

@@ -2,9 +2,8 @@
 //! sharp features), .glb files read back through the `gltf` crate, and the
 //! `mesh` command's --faces and output formats.
 
-mod common;
-#[path = "common/hostile.rs"]
-mod hostile;
+use crate::common;
+use crate::hostile_harness as hostile;
 
 use common::*;
 use glam::Vec3;
@@ -288,7 +287,7 @@ fn a_light_mesh_is_baked_into_a_texture_and_its_usd_layer_counts_as_its_files() 
     let v = &outcome.variants[0];
     assert!(v.textured);
     assert_eq!(v.triangles, obj.triangles.len());
-    assert_eq!(v.points, shapeshifter::geom::points::OrientedPoints::from_level(&level).len());
+    assert_eq!(v.points, shapeshifter::level::Level::surface_points(&level).len());
     let layer = std::fs::read_to_string(variant.join("variant.usda")).unwrap();
     let counts = layer.split("int[] faceVertexCounts = [").nth(1).unwrap().split(']').next().unwrap();
     assert_eq!(counts.split(',').count(), obj.triangles.len());

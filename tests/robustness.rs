@@ -5,7 +5,7 @@
 //! second command on a folder in use is refused at once; a run that yields
 //! nothing usable fails and says where the shapes vanished.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

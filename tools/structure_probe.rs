@@ -22,7 +22,7 @@ struct Args {
 
 fn main() -> anyhow::Result<()> {
     let args = Args::parse();
-    let (_, levels) = shapeshifter::level::dataset::read(&args.exemplar)?;
+    let (_, levels) = shapeshifter::io::dataset::read(&args.exemplar)?;
     let params = StructureParams::default();
     println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "copyF", "score");
     for dir in &args.variants {

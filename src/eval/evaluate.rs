@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
-use crate::level::dataset;
+use crate::io::dataset;
 use crate::error::{Error, Result};
 use crate::level::Level;
 use crate::io::mesh::{self, Mesh};

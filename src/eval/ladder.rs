@@ -594,7 +594,7 @@ pub fn check_flags(rows: &[VariantScores]) -> Vec<CheckResult> {
 /// Writes each rung's levels into `out/<rung>/` (level files only).
 pub fn write_rungs(out: &Path, rungs: &[(Rung, Vec<Level>)], provenance: &crate::io::vdb::Provenance) -> Result<()> {
     for (rung, levels) in rungs {
-        crate::level::dataset::write_variant(&out.join(rung.name()), levels, provenance, None, Default::default())?;
+        crate::io::dataset::write_variant(&out.join(rung.name()), levels, provenance, None, Default::default())?;
     }
     Ok(())
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 use crate::error::Result;
 use crate::io::cloud::{self, PointCloud};
 use crate::io::mesh::{self, Mesh};
-use crate::level::Up;
+use crate::grid::transform::Up;
 
 /// Every extension an exemplar may have.
 pub const EXTENSIONS: &[&str] = &["obj", "ply", "off", "stl", "glb", "gltf", "fbx", "dae", "las", "laz", "e57"];

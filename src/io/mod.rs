@@ -6,6 +6,7 @@
 
 pub mod assimp;
 pub mod cloud;
+pub mod dataset;
 pub mod exemplar;
 pub(crate) mod ffi;
 pub mod glb;

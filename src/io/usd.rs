@@ -24,7 +24,7 @@ use std::fmt::Write as _;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-use crate::level::Up;
+use crate::grid::transform::Up;
 
 /// Stage metadata every layer states.
 #[derive(Clone, Debug)]

@@ -19,7 +19,8 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::util::fs::{check_input_file, write_atomically};
 use crate::io::ffi::bridge::{self, GridSummary, LevelData, MetaEntry, MetaKind};
-use crate::level::{Frame, Level, Up};
+use crate::grid::transform::{Frame, Up};
+use crate::level::Level;
 
 /// Where a level came from, recorded in its file.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -183,21 +183,39 @@ impl SampleOptions {
     }
 }
 
+/// The largest level-0 box sampling starts from, in multiples of the
+/// level-0 grid's full cube (16^3 voxels at the shipped profiles: at most
+/// 262,144 voxels). Sampling fills the level-0 box densely with noise, and
+/// every finer level grows with it, so the box is bounded before anything
+/// is allocated: `--extent 4,4,4` or `16,4,1` fit, `1000,1000,1000` does not.
+pub const MAX_LEVEL0_BOX_CUBES: f64 = 64.0;
+
 /// The level-0 box of the exemplar resized by `extent` around its centre:
-/// `(min, size)` in voxels.
+/// `(min, size)` in voxels. An extent that is not positive, or whose box
+/// exceeds [`MAX_LEVEL0_BOX_CUBES`], is a usage error.
 pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
     if level0.is_empty() {
         return Err(Error::Invalid("the exemplar's level 0 has no voxels".into()));
     }
+    let shown = extent.map(|e| e.to_string()).join(",");
     if extent.iter().any(|e| !(e.is_finite() && *e > 0.0)) {
-        return Err(Error::Invalid(format!("extent {extent:?} must be positive")));
+        return Err(Error::Usage(format!("--extent {shown}: each scale must be a positive number")));
     }
     let lo = level0.coords.iter().fold(IVec3::MAX, |a, &c| a.min(c));
     let hi = level0.coords.iter().fold(IVec3::MIN, |a, &c| a.max(c));
     let size = hi - lo + IVec3::ONE;
-    let new_size = IVec3::from_array(
-        [0, 1, 2].map(|a| ((size[a] as f32 * extent[a]).round() as i32).max(1)),
-    );
+    // In f64 first: a huge extent must not overflow the i32 voxel counts.
+    let sizes = [0, 1, 2].map(|a| (size[a] as f64 * extent[a] as f64).round().max(1.0));
+    let voxels = sizes[0] * sizes[1] * sizes[2];
+    let budget = MAX_LEVEL0_BOX_CUBES * (level0.resolution as f64).powi(3);
+    if voxels > budget {
+        return Err(Error::Usage(format!(
+            "--extent {shown}: the level-0 box would be {}x{}x{} = {voxels:.3e} voxels, more than the {budget:.0} \
+             ({MAX_LEVEL0_BOX_CUBES} level-0 grids of {r}^3) sampling allows; every finer level grows by the same factor",
+            sizes[0], sizes[1], sizes[2], r = level0.resolution
+        )));
+    }
+    let new_size = IVec3::from_array(sizes.map(|v| v as i32));
     // keep the centre: shift by half the change (floor division keeps it exact for even changes)
     let new_lo = lo + IVec3::from_array([0, 1, 2].map(|a| (size[a] - new_size[a]).div_euclid(2)));
     Ok((new_lo, new_size))

@@ -114,19 +114,6 @@ pub enum Edit {
     Copy(VoxelBox, IVec3),
 }
 
-/// The `edit` command: reads `input`, applies `edit`, writes `output` (the
-/// input's provenance kept). Returns what it did, for the log.
-pub fn edit_file(input: &std::path::Path, output: &std::path::Path, edit: Edit) -> Result<String> {
-    let (mut level, provenance) = crate::io::vdb::read_level(input)?;
-    let named = |e: Error| Error::file(input, e.to_string());
-    let what = match edit {
-        Edit::Delete(region) => format!("deleted {} voxels", delete_box(&mut level, region).map_err(named)?),
-        Edit::Copy(region, to) => format!("copied {} voxels", copy_box(&mut level, region, to).map_err(named)?),
-    };
-    crate::io::vdb::write_level(output, &level, &provenance, Default::default())?;
-    Ok(format!("{what}; {} voxels -> {}", level.len(), output.display()))
-}
-
 fn fmt(c: IVec3) -> String {
     format!("{},{},{}", c.x, c.y, c.z)
 }

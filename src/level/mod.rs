@@ -4,12 +4,14 @@
 //! Channel order, named once here and nowhere else by bare number:
 //! offset (3), normal (3), colour (3), mask (1). See [`Channel`].
 
-pub mod dataset;
 pub mod edit;
 pub mod files;
 pub mod structure;
 
 use glam::{DVec3, IVec3, Vec3};
+use rayon::prelude::*;
+
+use crate::geom::points::OrientedPoints;
 
 pub use crate::grid::transform::{Frame, GridTransform, Up};
 
@@ -176,6 +178,32 @@ impl Level {
         self.normals = idx.iter().map(|&i| self.normals[i]).collect();
         self.colours = idx.iter().map(|&i| self.colours[i]).collect();
         self.mask = idx.iter().map(|&i| self.mask[i]).collect();
+    }
+}
+
+impl Level {
+    /// The surface points of the voxels with `mask > 0`, in the exemplar's
+    /// own world frame, with `spacing` = the level's voxel size in world units.
+    pub fn surface_points(&self) -> OrientedPoints {
+        let level = self;
+        let spacing = level.transform().voxel_world() as f32;
+        if level.mask.par_iter().all(|&m| m > 0.0) {
+            // Every voxel active (the usual case): copy, no index list.
+            return OrientedPoints {
+                positions: (0..level.len()).into_par_iter().map(|i| level.point_world(i).as_vec3()).collect(),
+                normals: level.normals.clone(),
+                colours: level.colours.clone(),
+                spacing,
+            };
+        }
+        let keep: Vec<u32> =
+            (0..level.len() as u32).into_par_iter().filter(|&i| level.mask[i as usize] > 0.0).collect();
+        OrientedPoints {
+            positions: keep.par_iter().map(|&i| level.point_world(i as usize).as_vec3()).collect(),
+            normals: keep.par_iter().map(|&i| level.normals[i as usize]).collect(),
+            colours: keep.par_iter().map(|&i| level.colours[i as usize]).collect(),
+            spacing,
+        }
     }
 }
 

@@ -64,6 +64,9 @@ fn schedule(
     let mut failed: Vec<String> = Vec::new();
     let t0 = Instant::now();
     let count = queue.len();
+    // `--progress alf`: the steps of every level, finished and running.
+    let all_steps: usize = queue.iter().map(|&k| total(k)).sum();
+    let mut finished_steps = 0;
     while !queue.is_empty() || !running.is_empty() {
         // After a stop signal (forwarded to the children): start nothing
         // more, and wait for the running children to checkpoint and end.
@@ -84,12 +87,18 @@ fn schedule(
         }
         std::thread::sleep(std::time::Duration::from_millis(if stopping { 50 } else { 500 }));
         let mut i = 0;
+        let mut running_steps = 0;
         while i < running.len() {
             let (k, process, bar, log_path) = &mut running[i];
-            bar.set_position(steps_logged(log_path) as u64);
+            let steps = steps_logged(log_path).min(total(*k));
+            bar.set_position(steps as u64);
             match process.try_wait().map_err(|e| Error::Invalid(format!("level {k} training: {e}")))? {
-                None => i += 1,
+                None => {
+                    running_steps += steps;
+                    i += 1
+                }
                 Some(status) => {
+                    finished_steps += total(*k);
                     crate::util::interrupt::forget(process);
                     if status.success() {
                         bar.finish_with_message("done");
@@ -102,6 +111,7 @@ fn schedule(
                 }
             }
         }
+        crate::util::progress::report_parts(finished_steps + running_steps, all_steps);
     }
     crate::util::interrupt::check()?;
     if !failed.is_empty() {

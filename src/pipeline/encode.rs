@@ -11,26 +11,39 @@ use crate::encode::{self, EncodeOptions};
 use crate::error::{Error, Result};
 use crate::io::exemplar::Exemplar;
 use crate::io::vdb::WriteOptions;
-use crate::level::dataset;
+use crate::io::dataset;
 use crate::level::Level;
 use crate::render::{self, RenderOptions};
 
 pub fn encode_options(config: &Config) -> EncodeOptions {
+    options_of(&config.encode)
+}
+
+/// The encoder's options for the settings `c`.
+pub fn options_of(c: &crate::config::EncodeConfig) -> EncodeOptions {
     EncodeOptions {
-        sampling_resolution: config.encode.sampling_resolution,
-        coarsest_resolution: config.encode.coarsest_resolution,
-        finest_resolution: config.encode.finest_resolution,
-        pooling: config.encode.pooling,
-        voxel_size: config.encode.voxel_size,
-        up: config.encode.up,
+        sampling_resolution: c.sampling_resolution,
+        coarsest_resolution: c.coarsest_resolution,
+        finest_resolution: c.finest_resolution,
+        pooling: c.pooling,
+        voxel_size: c.voxel_size,
+        up: c.up,
         cloud: crate::encode::CloudOptions {
-            colour: config.encode.cloud_colour,
-            normal_neighbours: config.encode.normal_neighbours,
-            orientation: config.encode.normal_orientation,
-            estimate_normals: config.encode.estimate_normals,
+            colour: c.cloud_colour,
+            normal_neighbours: c.normal_neighbours,
+            orientation: c.normal_orientation,
+            estimate_normals: c.estimate_normals,
         },
         ..Default::default()
     }
+}
+
+/// The `encode` command's options: `c`, checked; invalid settings (a finest
+/// resolution that is not a power of two, ...) are [`Error::Usage`].
+pub fn command_options(c: &crate::config::EncodeConfig) -> Result<EncodeOptions> {
+    let options = options_of(c);
+    options.validate().map_err(crate::error::Error::usage)?;
+    Ok(options)
 }
 
 /// Encodes the mesh file `mesh_path` into `dir` (the `encode` command, one

@@ -9,7 +9,7 @@ use super::RunPaths;
 use crate::error::{Error, Result};
 use crate::io::vdb;
 use crate::learn::train;
-use crate::level::dataset;
+use crate::io::dataset;
 use crate::level::Level;
 use crate::render;
 use crate::util::fs::write_file;

@@ -12,7 +12,7 @@ use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::io::vdb::Provenance;
 use crate::learn::sample::{self, SampleOptions};
-use crate::level::dataset;
+use crate::io::dataset;
 use crate::level::Level;
 use crate::util::fs::write_file;
 

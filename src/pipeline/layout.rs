@@ -100,7 +100,7 @@ pub fn kind_of(path: &Path) -> Option<FileKind> {
         EVAL_JSON => FileKind::Eval,
         _ if name.ends_with(".png") => FileKind::Preview,
         _ if name.ends_with(".safetensors") => FileKind::Model,
-        CONFIG | crate::level::dataset::MANIFEST => FileKind::Record,
+        CONFIG | crate::io::dataset::MANIFEST => FileKind::Record,
         _ if name.ends_with(".log") || name.ends_with(".csv") => FileKind::Record,
         _ => return None,
     })

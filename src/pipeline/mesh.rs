@@ -11,7 +11,7 @@ use crate::config::MeshConfig;
 use crate::error::{Error, Result};
 use crate::io::mesh::Mesh;
 use crate::io::vdb;
-use crate::level::dataset;
+use crate::io::dataset;
 use crate::level::Level;
 use crate::render;
 
@@ -19,7 +19,7 @@ use crate::render;
 /// the exemplar's frame; spacing = the level's voxel size in world units. An
 /// error when there are none (nothing to mesh or write).
 pub fn oriented_points(level: &Level) -> Result<crate::geom::points::OrientedPoints> {
-    let mut points = crate::geom::points::OrientedPoints::from_level(level);
+    let mut points = crate::level::Level::surface_points(level);
     if points.is_empty() {
         return Err(Error::Invalid("the level has no active voxels (mask > 0)".into()));
     }
@@ -77,8 +77,9 @@ struct MeshInputs {
 pub fn mesh_stage(dirs: &[PathBuf], exemplar_open: bool, resolution: u32, settings: &MeshConfig) -> Result<usize> {
     use layout::{MESH_GLB, MESH_MTL, MESH_OBJ, MESH_PLY, MESH_PREVIEW, MESH_TEXTURE};
     let mut done = 0;
-    for dir in dirs {
+    for (i, dir) in dirs.iter().enumerate() {
         crate::util::interrupt::check()?;
+        crate::util::progress::report_parts(i, dirs.len());
         let t = Instant::now();
         // The mesh depends on the finest level's data: its file's digest,
         // checked before anything is read (a finished mesh costs one hash).

@@ -13,6 +13,7 @@
 pub mod batch;
 pub mod children;
 pub mod cluster;
+pub mod edit;
 pub mod encode;
 pub mod evaluate;
 pub mod ladder;
@@ -25,6 +26,7 @@ pub mod train;
 pub mod usd;
 
 pub use children::{run_shards, train_in_processes};
+pub use edit::edit_file;
 pub use encode::*;
 pub use evaluate::*;
 pub use ladder::*;

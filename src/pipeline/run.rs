@@ -58,6 +58,115 @@ pub fn auto_jobs(jobs: usize, device: tch::Device, threads: i32) -> usize {
     }
 }
 
+/// What a user asks of `run` or `demo`, besides the exemplar and the folder.
+pub struct RunRequest<'a> {
+    /// A shipped profile or a TOML file; None: [`default_profile`].
+    pub profile: Option<&'a str>,
+    /// `--set SECTION.KEY=VALUE` overrides.
+    pub overrides: &'a [String],
+    /// Settings of how the exemplar file is read, given on the command line
+    /// (scale, up axis, point-cloud options), applied over the profile's.
+    pub exemplar: &'a dyn Fn(&mut crate::config::EncodeConfig),
+    /// `--device`: cpu, cuda, cuda:N or auto.
+    pub device_spec: &'a str,
+    pub n: usize,
+    pub seed: u64,
+    pub jobs: usize,
+    pub threads: i32,
+    pub progress: bool,
+    /// Wait for another writer of the folder instead of refusing at once.
+    pub wait: bool,
+}
+
+/// The profile a run uses when none is given: the demo's own (sized for its
+/// 10-minute budget) for the embedded exemplar, `cpu` for a file.
+pub fn default_profile(exemplar: ExemplarSource) -> &'static str {
+    if matches!(exemplar, ExemplarSource::Demo) {
+        "demo"
+    } else {
+        "cpu"
+    }
+}
+
+/// The configuration of a run: the profile, the overrides, then the exemplar
+/// settings; any of them invalid is [`Error::Usage`] (nothing was done).
+pub fn run_config(exemplar: ExemplarSource, r: &RunRequest) -> Result<Config> {
+    let mut config = Config::load(r.profile.unwrap_or(default_profile(exemplar)), r.overrides)?;
+    (r.exemplar)(&mut config.encode);
+    super::encode_options(&config).validate().map_err(Error::usage)?;
+    Ok(config)
+}
+
+/// `run` as a user asks for it: the configuration ([`run_config`]), the
+/// folder's lock, the device, then [`run`].
+pub fn run_exemplar(exemplar: ExemplarSource, out: &Path, r: &RunRequest) -> Result<RunSummary> {
+    let config = run_config(exemplar, r)?;
+    let _lock = crate::util::lock::lock(out, crate::util::lock::Mode::Exclusive, r.wait, "run")?;
+    let (device, why) = crate::learn::sparse::pick_device(r.device_spec)
+        .map_err(|e| Error::Invalid(format!("--device {}: {e}", r.device_spec)))?;
+    log::info!("device: {why}");
+    let exe = std::env::current_exe().map_err(|e| Error::Invalid(format!("cannot find this program for its child processes: {e}")))?;
+    let options = RunOptions {
+        config,
+        device,
+        device_spec: r.device_spec.to_string(),
+        n: r.n,
+        seed: r.seed,
+        jobs: r.jobs,
+        threads: r.threads,
+        progress: r.progress,
+        exe,
+    };
+    run(exemplar, out, &options)
+}
+
+/// The exemplars of a `run` command, each with its name as given and its
+/// folder: one input into `output` itself, several into `output/NAME`
+/// (named as the batch commands name them: a/x.off and b/x.off become a_x
+/// and b_x, never one folder).
+pub fn batch_of<'a>(inputs: &'a [PathBuf], output: &Path) -> Result<Vec<(ExemplarSource<'a>, String, PathBuf)>> {
+    let names = super::batch::output_names(inputs)?;
+    let several = inputs.len() > 1;
+    Ok(inputs
+        .iter()
+        .zip(names)
+        .map(|(m, name)| {
+            let out = if several { output.join(name) } else { output.to_path_buf() };
+            (ExemplarSource::File(m), m.display().to_string(), out)
+        })
+        .collect())
+}
+
+/// Runs exemplars one after the other, each into its folder, and hands each
+/// outcome to `report` as it finishes (with its seconds). A failed exemplar
+/// is reported and the next goes on; a stop signal or a usage error ends the
+/// batch with that error (nothing more is worth running). Returns how many
+/// failed.
+pub fn run_batch(
+    exemplars: &[(ExemplarSource, String, PathBuf)],
+    r: &RunRequest,
+    mut report: impl FnMut(&str, &Path, std::result::Result<&RunSummary, &Error>, f64),
+) -> Result<usize> {
+    let mut failed = 0;
+    for (source, name, out) in exemplars {
+        let t = Instant::now();
+        match run_exemplar(*source, out, r) {
+            Ok(summary) => report(name, out, Ok(&summary), t.elapsed().as_secs_f64()),
+            Err(e) if crate::util::interrupt::requested().is_some() || matches!(e, Error::Usage(_) | Error::Stopped(_)) => {
+                return Err(e)
+            }
+            Err(e) => {
+                report(name, out, Err(&e), t.elapsed().as_secs_f64());
+                failed += 1;
+            }
+        }
+    }
+    if failed > 0 {
+        log::error!("{failed} of {} inputs failed", exemplars.len());
+    }
+    Ok(failed)
+}
+
 /// Encode, train, sample, mesh and evaluate `exemplar` into `out`, reusing
 /// every stage whose inputs and configuration are unchanged.
 pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSummary> {
@@ -67,12 +176,18 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     let mut seconds = Vec::new();
     let mut stage = |name: &'static str, t: Instant| seconds.push((name, t.elapsed().as_secs_f64()));
 
+    // `--progress alf`: each stage's part of the whole (training dominates).
+    use crate::util::progress::span;
     let t = Instant::now();
-    let (source_name, exemplar_levels) = super::run_encode(exemplar, &paths, config)?;
+    let (source_name, exemplar_levels) = {
+        let _p = span(0.0, 0.05);
+        super::run_encode(exemplar, &paths, config)?
+    };
     stage("encode", t);
 
     crate::util::interrupt::check()?;
     let t = Instant::now();
+    let train_span = span(0.05, 0.80);
     let jobs = auto_jobs(o.jobs, o.device, o.threads);
     let threads = o.threads.max(1).to_string();
     if jobs > 1 {
@@ -80,6 +195,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     } else {
         super::run_train(&paths, config, o.device, None, o.progress)?;
     }
+    drop(train_span);
     stage("train", t);
 
     // Variants are independent: with several jobs, shards of them are sampled
@@ -87,6 +203,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     // write exactly what one process writes; the final in-process call then
     // finds every shard done.
     let t = Instant::now();
+    let sample_span = span(0.80, 0.93);
     let sharded = jobs > 1 && o.n > 1;
     let logs = out.join(super::layout::LOGS_DIR);
     if sharded {
@@ -101,6 +218,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
         })?;
     }
     let dirs = super::run_sample(&paths, config, o.device, &SampleOptions::from_config(config, o.n, o.seed))?;
+    drop(sample_span);
     stage("sample", t);
     // A run that made nothing usable is a failure, with the cause in its
     // one error line; some empty variants are a warning.
@@ -109,6 +227,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     super::check_usable(&empty, dirs.len(), &resolutions)?;
 
     let t = Instant::now();
+    let mesh_span = span(0.93, 0.97);
     if sharded {
         super::run_shards(o.n, jobs, &logs, "mesh", |first, count| {
             let mut c = std::process::Command::new(&o.exe);
@@ -118,15 +237,22 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     }
     let meshed = super::run_mesh(&paths, 0..o.n, &config.mesh)?;
     log::info!("mesh: {meshed} of {} variants meshed", dirs.len());
+    drop(mesh_span);
     stage("mesh", t);
 
     let t = Instant::now();
-    let usd = super::run_usd(&paths, Some(o.n), config.output.meters_per_unit)?;
+    let usd = {
+        let _p = span(0.97, 0.98);
+        super::run_usd(&paths, Some(o.n), config.output.meters_per_unit)?
+    };
     log::info!("usd: {} ({} variant layers)", usd.asset.display(), usd.variants.len());
     stage("usd", t);
 
     let t = Instant::now();
-    let evaluation = super::run_eval(&paths, o.n)?;
+    let evaluation = {
+        let _p = span(0.98, 1.0);
+        super::run_eval(&paths, o.n)?
+    };
     stage("evaluate", t);
     Ok(RunSummary { source_name, variants: dirs.len(), seconds, total_seconds: t0.elapsed().as_secs_f64(), evaluation, empty })
 }

@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::io::vdb::Provenance;
 use crate::learn::sample::{self, SampleOptions};
 use crate::learn::train;
-use crate::level::dataset;
+use crate::io::dataset;
 use crate::level::Level;
 
 /// A sampled variant with nothing at its finest level: its networks' masks
@@ -172,8 +172,9 @@ pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
         exemplar_open: job.manifest.open_surface,
         crs: job.manifest.crs.clone(),
     };
-    for &i in &todo {
+    for (done, &i) in todo.iter().enumerate() {
         crate::util::interrupt::check()?;
+        crate::util::progress::report_parts(done, todo.len());
         let tv = Instant::now();
         let one = SampleOptions { first: i, n: 1, ..options.clone() };
         let v = sample_variants(&models, levels, &one, job.from.map(|(l, _)| l.clone()))?;
@@ -330,4 +331,76 @@ mod endings {
         assert_eq!(from_memory.len(), 2);
         assert_eq!(from_memory[0].first_empty, 0);
     }
+}
+
+/// What a user asks of the `sample` command, besides the folders.
+pub struct SampleRequest<'a> {
+    /// The trained models' folder (None: `models/` in the exemplar's folder).
+    pub models: Option<&'a Path>,
+    pub n: usize,
+    pub first: usize,
+    pub seed: u64,
+    /// Per-axis scale of the level-0 box (1,1,1: the exemplar's extent).
+    pub extent: [f32; 3],
+    pub stop_level: Option<usize>,
+    /// A level file to continue from (e.g. an edited level).
+    pub from: Option<&'a Path>,
+    pub previews: bool,
+    /// `--set` overrides of the sampling settings, over the trained configuration.
+    pub overrides: &'a [String],
+    pub device_spec: &'a str,
+    pub wait: bool,
+}
+
+/// What `sample --json` prints: where the variants went and every file.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SampleRecord {
+    pub models: PathBuf,
+    pub output: PathBuf,
+    pub status: &'static str,
+    pub exit_status: u8,
+    pub variants: usize,
+    pub first: usize,
+    pub seed: u64,
+    pub seconds: f64,
+    pub files: Vec<super::layout::OutputFile>,
+}
+
+/// The `sample` command: variants of the exemplar encoded in `dir` from its
+/// trained models into `output` ([`sample_into`]), under the configuration
+/// recorded at training time with the request's overrides.
+pub fn sample_command(dir: &Path, output: &Path, r: &SampleRequest) -> Result<SampleRecord> {
+    let t = Instant::now();
+    let models = r.models.map_or_else(|| RunPaths::new(dir).models(), Path::to_path_buf);
+    let recorded = models.join(super::layout::CONFIG);
+    if !recorded.is_file() {
+        return Err(Error::Invalid(format!(
+            "{}: no trained models here (no config.toml): train first (`shapeshifter train {}`), or give --models",
+            models.display(),
+            dir.display()
+        )));
+    }
+    let config = Config::read(&recorded)?.with_overrides(r.overrides)?;
+    let (device, why) = crate::learn::sparse::pick_device(r.device_spec)
+        .map_err(|e| Error::Invalid(format!("--device {}: {e}", r.device_spec)))?;
+    log::info!("device: {why}");
+    let options = SampleOptions {
+        first: r.first,
+        extent: r.extent,
+        stop_level: r.stop_level,
+        ..SampleOptions::from_config(&config, r.n, r.seed)
+    };
+    let _lock = crate::util::lock::lock(output, crate::util::lock::Mode::Exclusive, r.wait, "sample")?;
+    let dirs = sample_into(dir, &models, output, &config, device, &options, r.from, r.previews)?;
+    Ok(SampleRecord {
+        models,
+        output: output.to_path_buf(),
+        status: "done",
+        exit_status: 0,
+        variants: dirs.len(),
+        first: r.first,
+        seed: r.seed,
+        seconds: t.elapsed().as_secs_f64(),
+        files: dirs.iter().flat_map(|d| super::layout::output_files(d)).collect(),
+    })
 }

@@ -11,7 +11,7 @@ use super::RunPaths;
 use crate::config::{Config, Stage};
 use crate::error::{Error, Result};
 use crate::learn::train;
-use crate::level::dataset;
+use crate::io::dataset;
 use crate::level::Level;
 
 /// What level `k`'s trained models depend on.
@@ -102,7 +102,13 @@ pub fn train_stage(
     let which = levels_to_run(config, levels, only)?;
     std::fs::create_dir_all(models_dir).map_err(|e| Error::file(models_dir, e.to_string()))?;
     let mut reports = Vec::new();
-    for k in which {
+    // Each level's part of the stage's progress, by its cost.
+    let costs: Vec<f64> = which.iter().map(|&k| training_cost(config, k)).collect();
+    let all: f64 = costs.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+    let mut before = 0.0;
+    for (i, k) in which.into_iter().enumerate() {
+        let _span = crate::util::progress::span(before / all, (before + costs[i]) / all);
+        before += costs[i];
         let d = train_digest(source_sha, config, k);
         let stage = StampOf::TrainLevel(k);
         if is_done(models_dir, stage, &d) {

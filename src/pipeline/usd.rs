@@ -56,7 +56,7 @@ pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result
     let mut finest = None;
     for (k, path) in &files {
         let (level, _) = vdb::read_level(path)?;
-        let points = crate::geom::points::OrientedPoints::from_level(&level);
+        let points = crate::level::Level::surface_points(&level);
         let (lo, hi) = usd::bounds_of(&points.positions);
         let half = Vec3::splat(points.spacing * 0.5);
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -190,7 +190,7 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
 /// folder there is (None: the `usd` command on an existing run folder):
 /// each sampled variant's `variant.usda`, then `OUT/variants.usda`.
 pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Result<UsdOutcome> {
-    let manifest = crate::level::dataset::read_manifest(&paths.exemplar())?;
+    let manifest = crate::io::dataset::read_manifest(&paths.exemplar())?;
     let dirs: Vec<PathBuf> = match n {
         Some(n) => (0..n).map(|i| variant_dir(&paths.variants(), i)).filter(|d| d.is_dir()).collect(),
         None => {

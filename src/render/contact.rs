@@ -46,7 +46,7 @@ pub fn contact_sheet(entries: &[(String, &Level)], opts: &SheetOptions) -> Resul
     if entries.is_empty() {
         return Err(RenderError::Invalid("a contact sheet needs at least one level".into()));
     }
-    let sets: Vec<OrientedPoints> = entries.iter().map(|(_, l)| OrientedPoints::from_level(l)).collect();
+    let sets: Vec<OrientedPoints> = entries.iter().map(|(_, l)| crate::level::Level::surface_points(l)).collect();
     let bounds = |s: &OrientedPoints| {
         s.positions.iter().filter(|p| p.is_finite()).fold(None, |acc: Option<(Vec3, Vec3)>, &p| match acc {
             None => Some((p, p)),

@@ -135,7 +135,7 @@ pub type Result<T> = std::result::Result<T, RenderError>;
 /// Renders a level's active voxels as lit splats (see [`render_points`]).
 pub fn render_level(level: &Level, opts: &RenderOptions) -> Result<RgbImage> {
     let opts = RenderOptions { up: opts.up.or(Some(level.frame.up)), ..opts.clone() };
-    render_points(&OrientedPoints::from_level(level), &opts)
+    render_points(&crate::level::Level::surface_points(level), &opts)
 }
 
 /// Renders oriented points as z-buffered, lit screen-space disc splats of

@@ -105,7 +105,7 @@ fn side_facing_the_key_light_is_brighter() {
 
 #[test]
 fn flipped_normals_still_light() {
-    let mut points = OrientedPoints::from_level(&sphere_level(32, 0.8, Vec3::ONE));
+    let mut points = crate::level::Level::surface_points(&sphere_level(32, 0.8, Vec3::ONE));
     let a = render_points(&points, &opts(128)).unwrap();
     points.normals.iter_mut().for_each(|n| *n = -*n);
     let b = render_points(&points, &opts(128)).unwrap();
@@ -163,7 +163,7 @@ fn from_level_keeps_active_voxels_in_world_units() {
     let mut level = sphere_level(16, 0.8, Vec3::ONE);
     level.frame = Frame { centre: DVec3::new(10.0, 0.0, -5.0), scale: 0.5, ..Default::default() };
     level.mask[0] = -1.0;
-    let points = OrientedPoints::from_level(&level);
+    let points = crate::level::Level::surface_points(&level);
     assert_eq!(points.len(), level.len() - 1);
     assert!((points.spacing - 2.0 / 16.0 / 0.5).abs() < 1e-6);
     let p = points.positions[0];
@@ -225,7 +225,7 @@ fn bad_inputs_are_errors() {
     mesh.triangles.clear();
     assert!(matches!(render_mesh(&mesh, &opts(64)), Err(RenderError::NoTriangles)));
     let zero = RenderOptions { width: 0, ..opts(64) };
-    let points = OrientedPoints::from_level(&sphere_level(8, 0.8, Vec3::ONE));
+    let points = crate::level::Level::surface_points(&sphere_level(8, 0.8, Vec3::ONE));
     assert!(matches!(render_points(&points, &zero), Err(RenderError::BadSize { .. })));
     let mut mesh = cube(false);
     mesh.triangles[0][0] = 99;

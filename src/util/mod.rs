@@ -7,6 +7,7 @@ pub mod digest;
 pub mod fs;
 pub mod interrupt;
 pub mod lock;
+pub mod progress;
 pub mod rng;
 pub mod seed;
 

@@ -65,6 +65,6 @@ pub fn read(path: &Path, name: &str) -> Result<PointCloud, String> {
         },
         crs,
         format: format!("E57, {} scan{}", scans.len(), if scans.len() == 1 { "" } else { "s" }),
-        up: crate::level::Up::Z,
+        up: crate::grid::transform::Up::Z,
     })
 }

@@ -221,7 +221,7 @@ pub fn read(path: &Path, name: &str) -> Result<PointCloud, String> {
         attributes: Attributes { normals: None, colours, intensity: Some(intensity), classification: Some(classification) },
         crs: crs(&header),
         format: format!("{kind} {}.{} point format {point_format}", v.major, v.minor),
-        up: crate::level::Up::Z,
+        up: crate::grid::transform::Up::Z,
     })
 }
 

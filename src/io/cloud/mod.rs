@@ -48,7 +48,7 @@ pub struct PointCloud {
     pub format: String,
     /// The format's vertical axis: +z for LAS/LAZ and E57 (geodetic and
     /// scanner frames), +y for PLY (as for meshes).
-    pub up: crate::level::Up,
+    pub up: crate::grid::transform::Up,
 }
 
 /// Where an exemplar cloud's colours come from.
@@ -135,7 +135,7 @@ impl PointCloud {
     /// bounding-box centre (a georeferenced tile keeps full f32 precision),
     /// the file's normals or estimated ones ([`crate::geom::normals`]), RGB
     /// colours or mid grey, spacing the median distance between neighbours.
-    pub fn oriented_points(&self, up: crate::level::Up) -> crate::geom::points::OrientedPoints {
+    pub fn oriented_points(&self, up: crate::grid::transform::Up) -> crate::geom::points::OrientedPoints {
         let (lo, hi) = self.bounds();
         let positions = relative_positions(&self.positions, (lo + hi) * 0.5);
         let (normals, spacing) = match &self.attributes.normals {

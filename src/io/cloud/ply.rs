@@ -279,7 +279,7 @@ pub fn read(bytes: &[u8], name: &str) -> Result<PointCloud, String> {
         attributes: Attributes { normals, colours, intensity, classification },
         crs: None,
         format: format!("PLY points ({format})"),
-        up: crate::level::Up::Y,
+        up: crate::grid::transform::Up::Y,
     })
 }
 

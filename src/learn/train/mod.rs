@@ -287,6 +287,10 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     let grid_voxels = data.target.len();
     let mut make_batch = data.diffusion_batches(tc)?;
     let diffusion_phase = if level == 0 { "level 0 diffusion" } else { "diffusion" };
+    // The level's progress: the upsampler's steps cost about a quarter of a
+    // diffusion step's (whole grid, no noise levels; pipeline::training_cost).
+    let upsampler_cost = if data.coarse.is_some() { 0.25 * tc.upsampler_iterations as f64 } else { 0.0 };
+    let split = upsampler_cost / (upsampler_cost + diff_total as f64).max(1.0);
     if let Some(coarse) = &data.coarse {
         // -------------------------------------------------------- levels >= 1
         let target = &data.target;
@@ -295,7 +299,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         {
             let opt = up_opt.as_ref().expect("an upsampler has an optimiser");
             let net = &u.net;
-            let phase = Phase { name: "upsampler", total: tc.upsampler_iterations, progress };
+            let phase = Phase { name: "upsampler", total: tc.upsampler_iterations, progress, share: (0.0, split) };
             let target_f = target.feats.shallow_clone();
             let base = state.clone();
             let r = phase.run(&mut state.upsampler_steps, &mut state.upsampler_loss, &stop, |step| {
@@ -321,7 +325,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     // ------------------------------------------------------------ diffusion
     if !interrupted {
         let net = &diffusion.net;
-        let phase = Phase { name: diffusion_phase, total: diff_total, progress };
+        let phase = Phase { name: diffusion_phase, total: diff_total, progress, share: (split, 1.0) };
         let base = state.clone();
         let d_ref = &diffusion;
         let r = phase.run(&mut state.diffusion_steps, &mut state.diffusion_loss, &stop, |step| {
@@ -494,6 +498,8 @@ struct Phase {
     name: &'static str,
     total: usize,
     progress: bool,
+    /// Its part of the level's training, for `--progress alf` (util::progress).
+    share: (f64, f64),
 }
 
 impl Phase {
@@ -526,6 +532,7 @@ impl Phase {
         };
         let t0 = Instant::now();
         let mut interrupted = false;
+        let _span = crate::util::progress::span(self.share.0, self.share.1);
         while *steps < self.total {
             let loss = step(*steps)?;
             if !loss.is_finite() {
@@ -539,6 +546,7 @@ impl Phase {
             }
             bar.set_message(format!("{} loss {loss:.4}", self.name));
             bar.inc(1);
+            crate::util::progress::report_parts(*steps, self.total);
             after(&StepInfo { steps: *steps, losses })?;
             if stop() {
                 interrupted = true;

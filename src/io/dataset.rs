@@ -20,7 +20,7 @@ pub const MANIFEST: &str = "manifest.json";
 #[derive(Clone, Debug, PartialEq)]
 pub struct Encoding {
     pub sampling_resolution: u32,
-    pub pooling: super::Pooling,
+    pub pooling: crate::level::Pooling,
     /// Seconds by encoding step.
     pub seconds: std::collections::BTreeMap<String, f64>,
 }
@@ -59,7 +59,7 @@ pub struct Manifest {
     pub centre: [f64; 3],
     pub scale: f64,
     pub sampling_resolution: u32,
-    pub pooling: super::Pooling,
+    pub pooling: crate::level::Pooling,
     pub levels: Vec<LevelEntry>,
     /// Wall seconds per encoding stage.
     pub seconds: std::collections::BTreeMap<String, f64>,
@@ -85,7 +85,7 @@ pub fn mesh_sha256(mesh: &Mesh) -> String {
 }
 
 
-pub use super::files::level_file_name;
+pub use crate::level::files::level_file_name;
 
 /// Writes levels, manifest and (optionally) previews into `dir`, which is
 /// created if needed. The manifest is written last: a folder with a manifest
@@ -109,7 +109,7 @@ pub fn write(
         let file = level_file_name(level.index);
         vdb::write_level(&dir.join(&file), level, &provenance, write)?;
         if let Some(preview) = preview {
-            preview(level, &dir.join(super::files::preview_file_name(level.index)))?;
+            preview(level, &dir.join(crate::level::files::preview_file_name(level.index)))?;
         }
         entries.push(LevelEntry { index: level.index, resolution: level.resolution, voxels: level.len(), file });
     }
@@ -183,7 +183,7 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
                 walk(&p, out)?;
             } else if p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
                 // Points files hold the same points as their level file's volumes.
-                super::files::parse(n).is_some_and(|(_, kind)| kind == super::files::LevelFile::Volumes)
+                crate::level::files::parse(n).is_some_and(|(_, kind)| kind == crate::level::files::LevelFile::Volumes)
             }) {
                 out.push(p);
             }
@@ -231,7 +231,7 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
     // other levels) must not be read as part of this variant.
     for e in std::fs::read_dir(dir).map_err(|e| Error::file(dir, e.to_string()))?.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        let stale = super::files::is_level_file(&name)
+        let stale = crate::level::files::is_level_file(&name)
             || name.starts_with("mesh.")
             || name.starts_with("stage_");
         if stale {
@@ -245,7 +245,7 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
         }
         vdb::write_level(&dir.join(level_file_name(level.index)), level, provenance, write)?;
         if let Some(preview) = preview {
-            preview(level, &dir.join(super::files::preview_file_name(level.index)))?;
+            preview(level, &dir.join(crate::level::files::preview_file_name(level.index)))?;
         }
     }
     Ok(())
