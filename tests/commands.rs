@@ -129,7 +129,7 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     ];
     let mut args = vec!["run", good.to_str().unwrap(), corrupt.to_str().unwrap(), aborted.to_str().unwrap(), good2.to_str().unwrap(), "-o", out.to_str().unwrap(), "-n", "1"];
     args.extend(tiny);
-    args.push("--json");
+    args.extend(["--json", "--progress", "alf"]);
     let o = shapeshifter(&args);
     assert!(!o.status.success(), "a failed input must fail the batch");
     let err = stderr(&o);
@@ -161,6 +161,24 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
         let stages: Vec<&str> = r["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
         assert_eq!(stages, ["encode", "train", "sample", "mesh", "usd", "evaluate"]);
     }
+    // --progress alf: `ALF_PROGRESS nn%` lines on stderr (stdout holds only
+    // the JSON records, checked above), rising through the whole batch to 100%.
+    let percents: Vec<u32> = err
+        .lines()
+        .filter_map(|l| l.strip_prefix("ALF_PROGRESS ")?.strip_suffix('%')?.parse().ok())
+        .collect();
+    assert!(percents.len() >= 20 && percents.windows(2).all(|w| w[0] < w[1]), "{percents:?}");
+    assert_eq!(percents.last(), Some(&100), "{percents:?}");
+    assert!(percents.iter().any(|&p| p > 25 && p < 50), "the second exemplar's quarter is reported too: {percents:?}");
+    // --extent past the budget: bad usage (2), one line, before anything is
+    // made (it used to allocate the dense box and be killed for memory).
+    let huge = dir.path().join("huge");
+    let o = shapeshifter(&["sample", out.join("tower").to_str().unwrap(), "-o", huge.to_str().unwrap(), "--extent", "1000,1000,1000"]);
+    assert_usage_failure(&o, "--extent 1000,1000,1000", "level-0 box");
+    assert!(!huge.exists());
+    let o = shapeshifter(&["sample", out.join("tower").to_str().unwrap(), "-o", huge.to_str().unwrap(), "--extent", "0,1,1"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("positive") && !huge.exists(), "{}", stderr(&o));
     // A bad --set is bad usage: 2, one line, nothing run.
     let o = shapeshifter(&["run", good.to_str().unwrap(), "-o", dir.path().join("bad").to_str().unwrap(), "--set", "mesh.nope=1"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
@@ -173,6 +191,40 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     let o = shapeshifter(&["usd", dir.path().to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(!dir.path().join(".shapeshifter.lock").exists() && !dir.path().join("variants.usda").exists());
+}
+
+/// Exit statuses are exact: 0 done, 1 a failed input, 2 bad usage (clap's,
+/// and the settings the library refuses before any work), and a panic is
+/// one line and 1, not Rust's 101 and a multi-line message.
+#[test]
+fn exit_codes_are_exact_and_a_panic_is_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = small_tower_ply(dir.path());
+    let m = mesh.to_str().unwrap();
+    let out = dir.path().join("enc");
+    let o = shapeshifter(&["encode", m, "-o", out.to_str().unwrap(), "--finest", "100"]);
+    assert_usage_failure(&o, "100", "power of two");
+    assert!(!out.exists(), "nothing made: {:?}", listing(dir.path()));
+    let o = shapeshifter(&["run", m, "-o", out.to_str().unwrap(), "--profile", "nope"]);
+    assert_usage_failure(&o, "nope", "unknown profile");
+    let o = shapeshifter(&["encode", m, "-o", out.to_str().unwrap(), "--no-such-flag"]);
+    assert_eq!(o.status.code(), Some(2), "clap's own usage errors: {}", stderr(&o));
+    let o = shapeshifter(&["info", dir.path().join("absent.obj").to_str().unwrap()]);
+    assert_clean_failure(&o, "absent.obj", "no such file");
+    let o = shapeshifter(&["info", m]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for place in ["main", "worker"] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_shapeshifter"))
+            .args(["info", m])
+            .env("SHAPESHIFTER_TEST_PANIC", place)
+            .output()
+            .unwrap();
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{place}: {err}");
+        let lines: Vec<&str> = err.lines().collect();
+        assert_eq!(lines.len(), 1, "{place}: one line: {err}");
+        assert!(lines[0].starts_with("error: internal error: a test panic") && lines[0].contains("src/cli.rs"), "{place}: {err}");
+    }
 }
 
 #[test]

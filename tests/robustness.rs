@@ -159,8 +159,23 @@ impl Drop for SmallDisk {
     }
 }
 
+/// The disk fills at three points of a run (`make test`).
 #[test]
 fn a_full_disk_fails_cleanly_leaves_whole_files_and_the_run_resumes_to_the_same_result() {
+    full_disks(&[2, 25, 55, 150]);
+}
+
+/// The disk fills at seven points of a run (`make test-slow`, and CI).
+#[test]
+#[ignore = "slow (about 2 minutes): make test-slow"]
+fn a_disk_filling_at_every_stage_fails_cleanly_and_the_run_resumes_to_the_same_result() {
+    full_disks(&[2, 10, 25, 40, 55, 70, 85, 150]);
+}
+
+/// Runs on a disk of `percents` of what a run writes, each larger than the
+/// last, until one finishes: each fails cleanly where it filled, the next
+/// resumes from what was left, and the end is what an uninterrupted run makes.
+fn full_disks(percents: &[u64]) {
     if !is_root() {
         skip("needs root to mount a small tmpfs (CI runs as root)");
         return;
@@ -179,7 +194,7 @@ fn a_full_disk_fails_cleanly_leaves_whole_files_and_the_run_resumes_to_the_same_
     let mut failures_seen = 0;
     // From 2% of what the run writes up: each run fails where the disk fills,
     // the next (on a larger disk) resumes from what the last one left.
-    for percent in [2u64, 10, 25, 40, 55, 70, 85, 150] {
+    for &percent in percents {
         disk.resize(total * percent / 100);
         let o = shapeshifter(&run_args(out.to_str().unwrap(), "2", SMALL));
         let err = stderr(&o);
@@ -252,18 +267,31 @@ fn stop(mut child: std::process::Child, sig: i32) -> (std::process::ExitStatus, 
     (status, err, seconds)
 }
 
+/// SIGTERM in training and SIGINT in meshing (`make test`).
 #[test]
 fn stop_signals_end_every_process_and_the_next_run_resumes_to_the_same_result() {
-    let reference = slow_reference();
-    let dir = tempfile::tempdir().unwrap();
-    let mut table = vec!["| signal | stage | exit | seconds to exit | processes left | resumed | identical |".to_string(), "|---|---|---|---|---|---|---|".to_string()];
-    // (signal, stage, the file whose appearance says the stage has begun)
-    let cases: [(i32, &str, &str); 4] = [
+    stops(&[(libc::SIGTERM, "training", "models/level_0_train.log"), (libc::SIGINT, "meshing", "logs/mesh_0.log")]);
+}
+
+/// Both signals in training, and a stop in sampling (`make test-slow`, and CI).
+#[test]
+#[ignore = "slow (about 2 minutes): make test-slow"]
+fn stop_signals_in_every_stage_end_every_process_and_the_run_resumes_to_the_same_result() {
+    stops(&[
         (libc::SIGTERM, "training", "models/level_0_train.log"),
         (libc::SIGINT, "training", "models/level_1_train.log"),
         (libc::SIGTERM, "sampling", "logs/sample_0.log"),
-        (libc::SIGINT, "meshing", "logs/mesh_0.log"),
-    ];
+    ]);
+}
+
+/// Each case (signal, stage, the file whose appearance says the stage has
+/// begun): the run stops with 128 + the signal, one line, no process or
+/// temporary file left, and the same command resumes to what an
+/// uninterrupted run makes.
+fn stops(cases: &[(i32, &str, &str)]) {
+    let reference = slow_reference();
+    let dir = tempfile::tempdir().unwrap();
+    let mut table = vec!["| signal | stage | exit | seconds to exit | processes left | resumed | identical |".to_string(), "|---|---|---|---|---|---|---|".to_string()];
     for (i, (sig, stage, marker)) in cases.iter().enumerate() {
         let out = dir.path().join(format!("run_{i}"));
         let out_s = out.to_str().unwrap().to_string();
@@ -367,8 +395,10 @@ fn a_run_that_yields_nothing_usable_fails_and_says_where_the_shapes_vanished() {
 
 /// `train` (levels in child processes) and `sample` (in one process) stop
 /// the same way as `run`, and their next run ends with `run`'s weights and
-/// variants.
+/// variants. (`make test` stops `run` in training and meshing, the same
+/// stop flag and child forwarding these commands use.)
 #[test]
+#[ignore = "slow (about 1 minute): make test-slow"]
 fn train_and_sample_stop_on_a_signal_and_end_like_an_uninterrupted_run() {
     let reference = slow_reference();
     let dir = tempfile::tempdir().unwrap();

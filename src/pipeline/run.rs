@@ -148,8 +148,10 @@ pub fn run_batch(
     mut report: impl FnMut(&str, &Path, std::result::Result<&RunSummary, &Error>, f64),
 ) -> Result<usize> {
     let mut failed = 0;
-    for (source, name, out) in exemplars {
+    for (i, (source, name, out)) in exemplars.iter().enumerate() {
         let t = Instant::now();
+        // `--progress alf`: each exemplar an equal part of the batch.
+        let _progress = crate::util::progress::span(i as f64 / exemplars.len() as f64, (i + 1) as f64 / exemplars.len() as f64);
         match run_exemplar(*source, out, r) {
             Ok(summary) => report(name, out, Ok(&summary), t.elapsed().as_secs_f64()),
             Err(e) if crate::util::interrupt::requested().is_some() || matches!(e, Error::Usage(_) | Error::Stopped(_)) => {

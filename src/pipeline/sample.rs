@@ -390,6 +390,9 @@ pub fn sample_command(dir: &Path, output: &Path, r: &SampleRequest) -> Result<Sa
         stop_level: r.stop_level,
         ..SampleOptions::from_config(&config, r.n, r.seed)
     };
+    // An extent past the budget is refused before anything is made.
+    let level0 = crate::io::vdb::read_level(&dir.join(dataset::level_file_name(0)))?.0;
+    sample::level0_box(&level0, r.extent)?;
     let _lock = crate::util::lock::lock(output, crate::util::lock::Mode::Exclusive, r.wait, "sample")?;
     let dirs = sample_into(dir, &models, output, &config, device, &options, r.from, r.previews)?;
     Ok(SampleRecord {

@@ -59,13 +59,24 @@ pub fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-/// Asserts that a run failed with ONE error line that names `file` and
-/// contains `problem`, and did not panic.
+/// Asserts that a run failed with exit status 1 (a failed input) and ONE
+/// error line that names `file` and contains `problem`.
 pub fn assert_clean_failure(o: &Output, file: &str, problem: &str) {
+    assert_failure_with(o, 1, file, problem);
+}
+
+/// Asserts that a command line was refused as bad usage: exit status 2 and
+/// ONE error line that names `what` and contains `problem`.
+pub fn assert_usage_failure(o: &Output, what: &str, problem: &str) {
+    assert_failure_with(o, 2, what, problem);
+}
+
+/// Exit status exactly `code` (not a panic's 101, not a signal) and ONE
+/// error line naming `file` and saying `problem`.
+pub fn assert_failure_with(o: &Output, code: i32, file: &str, problem: &str) {
     let err = stderr(o);
-    assert!(!o.status.success(), "expected failure, got success; stderr: {err}");
-    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
-    assert!(o.status.code().is_some(), "killed by a signal (C++ exception?): {err}");
+    assert_eq!(o.status.code(), Some(code), "expected exit status {code}; stderr: {err}");
+    assert!(!err.contains("panicked at") && !err.contains("internal error"), "panicked: {err}");
     let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
     assert_eq!(lines.len(), 1, "expected one error line, got: {err}");
     assert!(!file.is_empty() && lines[0].contains(file), "error does not name '{file}': {}", lines[0]);
