@@ -6,10 +6,6 @@
 # cargo from rustup (make setup installs it there on a bare machine).
 export PATH := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin:$(PATH)
 
-# Compiled Rust crates shared between clones (make setup installs sccache and
-# links it as .sccache; expanded when a recipe runs, after setup).
-export RUSTC_WRAPPER = $(if $(wildcard $(CURDIR)/.sccache),$(CURDIR)/.sccache,)
-
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 

