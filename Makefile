@@ -28,16 +28,20 @@ demo: build
 SKIP_LOG := $(CURDIR)/target/test-skips.log
 define run_tests
 	@mkdir -p target && rm -f $(SKIP_LOG)
-	@SHAPESHIFTER_SKIP_LOG=$(SKIP_LOG) cargo test --release $(CARGO_FEATURES) -- --test-threads=2 $(1); status=$$?; \
+	@SHAPESHIFTER_SKIP_LOG=$(SKIP_LOG) cargo test --release $(CARGO_FEATURES) $(1) -- --test-threads=2 $(2); status=$$?; \
 	if [ -s $(SKIP_LOG) ]; then \
 	  echo "make $@: $$(wc -l < $(SKIP_LOG)) check(s) SKIPPED:"; sed 's/^/  /' $(SKIP_LOG); \
 	else echo "make $@: nothing skipped"; fi; \
 	exit $$status
 endef
+# The quick suite builds only the examples it runs (the integrator examples of
+# tests/commands.rs); `make test-slow` builds every target, the benchmarks and
+# tools included, so they keep compiling (CI runs it).
 test: setup
-	$(call run_tests,)
+	cargo build --release $(CARGO_FEATURES) --example encode_mesh --example read_level
+	$(call run_tests,--lib --bins --tests,)
 test-slow: setup
-	$(call run_tests,--ignored)
+	$(call run_tests,,--ignored)
 
 # The pipeline as a SLURM job graph on a real one-node cluster on this machine
 # (installs slurm-wlm and munge; daemons in a private network namespace),

@@ -530,13 +530,14 @@ fn train_refusals_write_nothing() {
 
 /// The integrator examples (examples/) do what their documentation says:
 /// `encode_mesh` writes a level file per level, `read_level` reads one back
-/// and reports its surface in world units. `cargo test` builds the examples.
+/// and reports its surface in world units. `make test` builds these two
+/// examples first (`cargo test` without target filters builds every example).
 #[test]
 fn the_integrator_examples_encode_and_read_levels() {
     let examples = std::path::Path::new(env!("CARGO_BIN_EXE_shapeshifter")).parent().unwrap().join("examples");
     let (encode, read) = (examples.join("encode_mesh"), examples.join("read_level"));
     if !encode.is_file() || !read.is_file() {
-        common::skip("the integrator examples are not built (`cargo test` without a test filter builds them)");
+        common::skip("the integrator examples are not built (`make test` builds them, or `cargo build --release --examples`)");
         return;
     }
     let dir = tempfile::tempdir().unwrap();
