@@ -994,10 +994,11 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 output.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default()
             };
             if !mesh::COLOUR_EXTENSIONS.contains(&ext.as_str()) {
-                anyhow::bail!("{}: mesh writes .ply or .glb (vertex colours), not '.{ext}'", output.display());
+                let why = format!("{}: mesh writes .ply or .glb (vertex colours), not '.{ext}'", output.display());
+                return Err(shapeshifter::Error::Usage(why).into());
             }
             if several && preview.is_some() {
-                anyhow::bail!("--preview takes one input (several: run `render` on the meshes)");
+                return Err(shapeshifter::Error::Usage("--preview takes one input (several: run `render` on the meshes)".into()).into());
             }
             let names = pipeline::batch::output_names(&inputs)?;
             let report = pipeline::batch::run(&inputs, &names, batch.jobs, |input, name| {

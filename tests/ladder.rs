@@ -10,10 +10,9 @@ use shapeshifter::config::Config;
 use shapeshifter::eval::ladder::Rung;
 use shapeshifter::{encode::exemplar, pipeline};
 
-/// The demo exemplar encoded as `demo` encodes it (the demo profile: 128^3),
-/// with `overrides`.
-fn encoded_demo(dir: &std::path::Path, overrides: &[String]) -> (std::path::PathBuf, Config) {
-    let config = Config::load("demo", overrides).unwrap();
+/// The demo exemplar encoded as `demo` encodes it (the demo profile: 128^3).
+fn encoded_demo(dir: &std::path::Path) -> (std::path::PathBuf, Config) {
+    let config = Config::load("demo", &[]).unwrap();
     let mesh = exemplar::ruined_tower(&Default::default());
     let enc = dir.join("exemplar");
     pipeline::encode_stage(&shapeshifter::io::exemplar::Exemplar::Mesh(mesh.clone()), "demo", "0", &config, &enc).unwrap();
@@ -23,7 +22,7 @@ fn encoded_demo(dir: &std::path::Path, overrides: &[String]) -> (std::path::Path
 #[test]
 fn every_measure_ranks_the_demo_ladder_as_expected() {
     let dir = tempfile::tempdir().unwrap();
-    let (enc, config) = encoded_demo(dir.path(), &[]);
+    let (enc, config) = encoded_demo(dir.path());
     let out = dir.path().join("ladder");
     let outcome = pipeline::ladder_stage(&enc, &out, Some(&config), tch::Device::Cpu).unwrap();
     let rows = &outcome.evaluation.report.variants;
@@ -69,8 +68,7 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
 #[test]
 fn ladder_and_contact_sheet_commands() {
     let dir = tempfile::tempdir().unwrap();
-    // At 64^3: this checks the commands, the test above the ranking at 128^3.
-    let (enc, _) = encoded_demo(dir.path(), &["encode.finest_resolution=64".into(), "encode.sampling_resolution=256".into()]);
+    let (enc, _) = encoded_demo(dir.path());
     let out = dir.path().join("lad");
     let o = shapeshifter(&["ladder", enc.to_str().unwrap(), "-o", out.to_str().unwrap(), "--profile", "none"]);
     assert!(o.status.success(), "{}\n{}", stdout(&o), stderr(&o));

@@ -189,7 +189,8 @@ fn mesh_command_writes_light_glb_and_ply_and_refuses_bad_requests_cleanly() {
     ] {
         let o = dir.path().join(out);
         let r = shapeshifter(&["mesh", lv, "-o", o.to_str().unwrap(), "--resolution", "64", "--faces", extra]);
-        assert_clean_failure(&r, if problem == "--faces" { "--faces" } else { out }, problem);
+        // Refused before any work: bad usage, exit 2.
+        assert_usage_failure(&r, if problem == "--faces" { "--faces" } else { out }, problem);
     }
     assert_eq!(listing(dir.path()), before, "a refused mesh command left files behind");
 
