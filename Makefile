@@ -9,10 +9,15 @@ export PATH := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin:$(PATH)
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup build demo test test-slow figures-check bench bench-poisson decimate-bench fuzz clean cluster-test interop
+.PHONY: setup setup-check build demo test test-slow figures-check bench bench-poisson decimate-bench fuzz clean cluster-test interop
 
 setup:
 	@bash scripts/setup.sh
+
+# `make setup` on a bare Debian 12 chroot (debootstrap minbase; root): what
+# it installs, and the versions it leaves (scripts/bare-setup-check.sh).
+setup-check:
+	bash scripts/bare-setup-check.sh
 
 build: setup
 	cargo build --release $(CARGO_FEATURES)

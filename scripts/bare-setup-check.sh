@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# `make setup` on a bare Debian 12: a debootstrap chroot (minbase: no compiler,
+# no Rust, no Python, no make), the project copied in (git archive), then
+# `apt-get install make` and `make setup` as the README says, then the
+# versions of what the build needs. Root only; installs debootstrap when
+# missing. Keeps the chroot in $BARE_ROOT (default /var/tmp/shapeshifter-bare)
+# for a second look; `make setup-check` runs it.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=${BARE_ROOT:-/var/tmp/shapeshifter-bare}
+[ "$(id -u)" -eq 0 ] || { echo "setup-check: needs root (debootstrap, chroot)" >&2; exit 1; }
+command -v debootstrap >/dev/null || { apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q debootstrap; }
+if [ ! -x "$ROOT/usr/bin/apt-get" ]; then
+  echo "setup-check: debootstrap bookworm (minbase) into $ROOT" >&2
+  rm -rf "$ROOT"
+  debootstrap --variant=minbase bookworm "$ROOT" http://deb.debian.org/debian >/dev/null
+fi
+cleanup() { for m in dev/pts dev sys proc; do umount -l "$ROOT/$m" 2>/dev/null || true; done; }
+trap cleanup EXIT
+mount -t proc proc "$ROOT/proc"
+mount -t sysfs sys "$ROOT/sys"
+mount --bind /dev "$ROOT/dev"
+mount --bind /dev/pts "$ROOT/dev/pts"
+cp /etc/resolv.conf "$ROOT/etc/resolv.conf"
+rm -rf "$ROOT/root/shapeshifter" && mkdir -p "$ROOT/root/shapeshifter"
+git archive HEAD | tar -x -C "$ROOT/root/shapeshifter"
+echo "setup-check: in the chroot: $(chroot "$ROOT" sh -c 'command -v make g++ cargo rustc python3 || true' | tr '\n' ' ')(none of make, g++, cargo, rustc, python3 before)" >&2
+chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin bash -c '
+  set -euo pipefail
+  cd /root/shapeshifter
+  apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q make >/dev/null
+  start=$(date +%s)
+  make setup
+  echo "setup-check: make setup took $(( $(date +%s) - start )) s"
+  export PATH="$HOME/.cargo/bin:$PATH"
+  echo "setup-check: $(cargo --version), $(rustc --version)"
+  echo "setup-check: $(g++ --version | head -1)"
+  echo "setup-check: libtorch $(readlink .libtorch)"
+  echo "setup-check: OpenVDB $(dpkg-query -W -f="\${Version}" libopenvdb-dev), CGAL $(dpkg-query -W -f="\${Version}" libcgal-dev), OpenMesh $(dpkg-query -W -f="\${Version}" libopenmesh-dev)"
+  start=$(date +%s)
+  make setup >/dev/null 2>&1
+  echo "setup-check: a second make setup took $(( $(date +%s) - start )) s"
+'
