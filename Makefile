@@ -40,9 +40,12 @@ define run_tests
 	exit $$status
 endef
 # The quick suite builds only the examples it runs (the integrator examples of
-# tests/commands.rs); `make test-slow` builds every target, the benchmarks and
-# tools included, so they keep compiling (CI runs it).
+# tests/commands.rs), after the test binaries (one cargo call compiles the
+# library and its unit tests side by side on two cores); `make test-slow`
+# builds every target, the benchmarks and tools included, so they keep
+# compiling (CI runs it).
 test: setup
+	cargo test --release $(CARGO_FEATURES) --lib --bins --tests --no-run
 	cargo build --release $(CARGO_FEATURES) --example encode_mesh --example read_level
 	$(call run_tests,--lib --bins --tests,)
 test-slow: setup
