@@ -22,13 +22,19 @@ mount -t sysfs sys "$ROOT/sys"
 mount --bind /dev "$ROOT/dev"
 mount --bind /dev/pts "$ROOT/dev/pts"
 cp /etc/resolv.conf "$ROOT/etc/resolv.conf"
+# This site's network: the certificate authorities it adds (a proxy's, say)
+# and pip's configuration, which a machine of the site would have too.
+mkdir -p "$ROOT/usr/local/share/ca-certificates"
+cp /usr/local/share/ca-certificates/*.crt "$ROOT/usr/local/share/ca-certificates/" 2>/dev/null || true
+[ -f /etc/pip.conf ] && cp /etc/pip.conf "$ROOT/etc/pip.conf"
 rm -rf "$ROOT/root/shapeshifter" && mkdir -p "$ROOT/root/shapeshifter"
 git archive HEAD | tar -x -C "$ROOT/root/shapeshifter"
-echo "setup-check: in the chroot: $(chroot "$ROOT" sh -c 'command -v make g++ cargo rustc python3 || true' | tr '\n' ' ')(none of make, g++, cargo, rustc, python3 before)" >&2
+echo "setup-check: before make setup the chroot has: $(chroot "$ROOT" sh -c 'command -v make g++ cargo rustc python3 ~/.cargo/bin/cargo || true' | tr '\n' ' ')" >&2
 chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin bash -c '
   set -euo pipefail
   cd /root/shapeshifter
-  apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q make >/dev/null
+  apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q make ca-certificates >/dev/null
+  update-ca-certificates >/dev/null
   start=$(date +%s)
   make setup
   echo "setup-check: make setup took $(( $(date +%s) - start )) s"

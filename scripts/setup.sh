@@ -31,12 +31,13 @@ RUST_VERSION=$(sed -n 's/^channel *= *"\(.*\)"/\1/p' rust-toolchain.toml)
 export PATH="${CARGO_HOME:-$HOME/.cargo}/bin:$PATH"
 if ! command -v rustup >/dev/null 2>&1; then
   echo "setup: installing rustup and Rust $RUST_VERSION into ${CARGO_HOME:-$HOME/.cargo}" >&2
-  init=$(mktemp)
-  curl --proto '=https' --tlsv1.2 -sSf -o "$init" \
+  # rustup picks its role from its file name: it must be called rustup-init.
+  dir=$(mktemp -d)
+  curl --proto '=https' --tlsv1.2 -sSf -o "$dir/rustup-init" \
     "https://static.rust-lang.org/rustup/dist/$(uname -m)-unknown-linux-gnu/rustup-init"
-  chmod +x "$init"
-  "$init" -y -q --profile minimal --default-toolchain "$RUST_VERSION" --no-modify-path
-  rm -f "$init"
+  chmod +x "$dir/rustup-init"
+  "$dir/rustup-init" -y -q --profile minimal --default-toolchain "$RUST_VERSION" --no-modify-path
+  rm -rf "$dir"
 elif ! rustup run "$RUST_VERSION" rustc --version >/dev/null 2>&1; then
   echo "setup: installing Rust $RUST_VERSION (rustup)" >&2
   rustup toolchain install "$RUST_VERSION" --profile minimal
