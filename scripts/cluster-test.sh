@@ -179,7 +179,12 @@ print(f"  eval: identical ({len(a['variants'])} variants, diversity {a['diversit
 EOF
 
 # --- 3. a training task killed mid-way resumes from its checkpoint --------------
-LONG=(--set encode.sampling_resolution=128 --set encode.finest_resolution=32 --set train.level0_iterations=4000 --set train.upper_iterations=30 --set train.upsampler_iterations=30
+# Level 0 long enough to be killed mid-way (the requeue comes at its first
+# checkpoint, 0.6 s in) and short enough to finish within the wait below on a
+# CPU without AVX-512, where a level-0 step of the cpu profile took 0.88 s
+# (2026-12-03; 4000 steps did not finish in 900 s there).
+LEVEL0_STEPS=300
+LONG=(--set encode.sampling_resolution=128 --set encode.finest_resolution=32 --set train.level0_iterations=$LEVEL0_STEPS --set train.upper_iterations=30 --set train.upsampler_iterations=30
       --set train.checkpoint_minutes=0.01 --set cluster.train_mem_gb=1 --set cluster.encode_mem_gb=1)
 "$BIN" -q stage encode "$MESH" -o "$WORK/requeue" "${LONG[@]}" > /dev/null
 "$BIN" -q slurm "$MESH" -o "$WORK/requeue" -n 1 "${LONG[@]}" --dry-run > /dev/null
@@ -200,10 +205,10 @@ wait_idle 900
 log=$(ls "$WORK"/requeue/slurm/logs/ss-train-*_0.out)
 grep -m1 "resuming at upsampler step" "$log" | sed 's/^/  requeue: /' \
   || { echo "cluster-test: the requeued task did not resume" >&2; exit 1; }
-python3 - "$state" <<'EOF'
+python3 - "$state" "$LEVEL0_STEPS" <<'EOF'
 import json, sys
 s = json.load(open(sys.argv[1]))
-if not (s["finished"] and s["diffusion_steps"] == 4000):
+if not (s["finished"] and s["diffusion_steps"] == int(sys.argv[2])):
     sys.exit(f"cluster-test: after the requeue level 0 is at {s['diffusion_steps']} steps, finished={s['finished']}")
 print(f"  requeue: level 0 finished all {s['diffusion_steps']} steps after the resume")
 EOF
