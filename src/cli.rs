@@ -12,7 +12,7 @@ use shapeshifter::render::RenderOptions;
 use shapeshifter::config::Config;
 use shapeshifter::learn::sample::SampleOptions;
 use shapeshifter::util::lock;
-use shapeshifter::{level::edit, eval::evaluate, io::info, io::mesh, pipeline, learn::sparse, io::vdb};
+use shapeshifter::{level::edit, eval::evaluate, io::info, io::mesh, pipeline, io::vdb};
 
 #[derive(Parser, Debug)]
 #[command(name = "shapeshifter", version, about = "3D shape variations from one exemplar mesh (ShapeShifter, CVPR 2025)")]
@@ -668,9 +668,7 @@ pub fn init_logging(cli: &Cli) {
 }
 
 fn device(spec: &str) -> Result<tch::Device> {
-    let (device, why) = sparse::pick_device(spec).map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
-    log::info!("device: {why}");
-    Ok(device)
+    Ok(pipeline::run::device(spec)?)
 }
 
 /// `--extent X,Y,Z`: three positive scales (a bad one is a usage error, exit 2).

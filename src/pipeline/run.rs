@@ -88,6 +88,14 @@ pub fn default_profile(exemplar: ExemplarSource) -> &'static str {
     }
 }
 
+/// The device `--device SPEC` names (cpu, cuda, cuda:N, auto), with a log
+/// line saying why; every command that trains or samples picks it here.
+pub fn device(spec: &str) -> Result<tch::Device> {
+    let (device, why) = crate::learn::sparse::pick_device(spec).map_err(|e| Error::Invalid(format!("--device {spec}: {e}")))?;
+    log::info!("device: {why}");
+    Ok(device)
+}
+
 /// The configuration of a run: the profile, the overrides, then the exemplar
 /// settings; any of them invalid is [`Error::Usage`] (nothing was done).
 pub fn run_config(exemplar: ExemplarSource, r: &RunRequest) -> Result<Config> {
@@ -102,9 +110,7 @@ pub fn run_config(exemplar: ExemplarSource, r: &RunRequest) -> Result<Config> {
 pub fn run_exemplar(exemplar: ExemplarSource, out: &Path, r: &RunRequest) -> Result<RunSummary> {
     let config = run_config(exemplar, r)?;
     let _lock = crate::util::lock::lock(out, crate::util::lock::Mode::Exclusive, r.wait, "run")?;
-    let (device, why) = crate::learn::sparse::pick_device(r.device_spec)
-        .map_err(|e| Error::Invalid(format!("--device {}: {e}", r.device_spec)))?;
-    log::info!("device: {why}");
+    let device = device(r.device_spec)?;
     let exe = std::env::current_exe().map_err(|e| Error::Invalid(format!("cannot find this program for its child processes: {e}")))?;
     let options = RunOptions {
         config,

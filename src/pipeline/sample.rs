@@ -381,9 +381,7 @@ pub fn sample_command(dir: &Path, output: &Path, r: &SampleRequest) -> Result<Sa
         )));
     }
     let config = Config::read(&recorded)?.with_overrides(r.overrides)?;
-    let (device, why) = crate::learn::sparse::pick_device(r.device_spec)
-        .map_err(|e| Error::Invalid(format!("--device {}: {e}", r.device_spec)))?;
-    log::info!("device: {why}");
+    let device = super::run::device(r.device_spec)?;
     let options = SampleOptions {
         first: r.first,
         extent: r.extent,
