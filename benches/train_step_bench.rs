@@ -62,7 +62,7 @@ fn main() -> anyhow::Result<()> {
     let _bf16 = shapeshifter::learn::sparse::bf16_compute_scope(tc.bf16);
     println!(
         "profile {}, {} channels, {}, {} libtorch thread(s), median of {} steps; GFLOP/s = 3 x forward GEMM work / step time",
-        config.name, config.model.channels, if tc.bf16 { "bf16 GEMMs" } else { "f32" }, args.threads, args.steps
+        config.name, config.model.channels, if !tc.bf16 { "f32" } else if shapeshifter::learn::sparse::bf16_is_native(tch::Device::Cpu) { "bf16 GEMMs" } else { "bf16 GEMMs, emulated (no AVX512-BF16: training itself would use f32)" }, args.threads, args.steps
     );
     println!("level  res  rows/step  step s   GFLOP/s  GEMM GFLOP/s  fraction  bf16 GEMM GF/s");
     for (l, level) in levels.iter().enumerate() {

@@ -20,6 +20,26 @@ pub fn bf16_compute_scope(on: bool) -> Bf16Scope {
     Bf16Scope { previous }
 }
 
+/// Whether `device` multiplies bf16 in hardware: any CUDA device, or a CPU
+/// with AVX512-BF16 or AMX-BF16. Elsewhere libtorch emulates bf16, and a GEMM
+/// runs at about 2 GFLOP/s against 35-55 in f32 (measured on a 2-core AVX2 EPYC:
+/// a 64-channel level-0 training step 0.87 s in bf16, 0.078 s in f32), so mixed
+/// precision there would make training ten times slower, not faster.
+pub fn bf16_is_native(device: tch::Device) -> bool {
+    if device.is_cuda() {
+        return true;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        // Every CPU with AMX-BF16 also has AVX512-BF16.
+        std::arch::is_x86_feature_detected!("avx512bf16")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// Restores the previous setting of [`bf16_compute_scope`] when dropped.
 pub struct Bf16Scope {
     previous: bool,

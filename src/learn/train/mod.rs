@@ -210,7 +210,11 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     }
     let t0 = Instant::now();
     let tc = &config.train;
-    let _bf16 = crate::learn::sparse::bf16_compute_scope(tc.bf16);
+    let bf16 = tc.bf16 && crate::learn::sparse::bf16_is_native(device);
+    if tc.bf16 && !bf16 {
+        log::info!("level {level}: train.bf16 is on, but this CPU has no bf16 instructions (AVX512-BF16, AMX): the convolutions multiply in f32, about 10x faster here than emulated bf16");
+    }
+    let _bf16 = crate::learn::sparse::bf16_compute_scope(bf16);
     let digest = resume_digest(config);
 
     let mut state = starting_state(job, &digest)?;
