@@ -24,7 +24,12 @@
 //!   `torn` (holes through the 64^3 surface: balls of 4 voxels around 12
 //!   random surface voxels, and their descendants), `shrunken` (every level
 //!   scaled by 0.6 about the exemplar's centroid and binned into voxels
-//!   again). The `exemplar` rung is also the copy: the near-copy flag must
+//!   again), `slit` (a slit 2 voxels wide cut through the 64^3 surface along
+//!   the whole height, from the vertical axis through the centroid outwards
+//!   on one side: a tower split open), `roof_strip` (a strip 3 voxels wide
+//!   across the whole shape, on one side of the centroid, where the topmost
+//!   upward-facing 64^3 voxels of each column are removed: a roof with a strip
+//!   missing). The `exemplar` rung is also the copy: the near-copy flag must
 //!   fire on it.
 //!
 //! [`expectations`] says which rungs each measure must rank below the
@@ -55,10 +60,12 @@ pub enum Rung {
     Fragment,
     Torn,
     Shrunken,
+    Slit,
+    RoofStrip,
 }
 
 impl Rung {
-    pub const ALL: [Rung; 10] = [
+    pub const ALL: [Rung; 12] = [
         Rung::Exemplar,
         Rung::SmoothWeak,
         Rung::SmoothStrong,
@@ -69,6 +76,8 @@ impl Rung {
         Rung::Fragment,
         Rung::Torn,
         Rung::Shrunken,
+        Rung::Slit,
+        Rung::RoofStrip,
     ];
 
     /// Folder name, and the name in reports.
@@ -84,6 +93,8 @@ impl Rung {
             Rung::Fragment => "fragment",
             Rung::Torn => "torn",
             Rung::Shrunken => "shrunken",
+            Rung::Slit => "slit",
+            Rung::RoofStrip => "roof_strip",
         }
     }
 }
@@ -105,6 +116,9 @@ pub struct LadderOptions {
     pub torn_radius: f32,
     /// Scale of the shrunken copy.
     pub shrink: f32,
+    /// Width of the slit and of the roof strip, voxels of the 64^3 level.
+    pub slit_width: f32,
+    pub roof_strip_width: f32,
 }
 
 impl Default for LadderOptions {
@@ -118,6 +132,8 @@ impl Default for LadderOptions {
             torn_holes: 12,
             torn_radius: 4.0,
             shrink: 0.6,
+            slit_width: 2.0,
+            roof_strip_width: 3.0,
         }
     }
 }
@@ -137,7 +153,7 @@ pub fn degrade(levels: &[Level], opts: &LadderOptions) -> Result<Vec<(Rung, Vec<
         v.push(l);
         v
     };
-    Ok(vec![
+    let mut rungs = vec![
         (Rung::Exemplar, levels.to_vec()),
         (Rung::SmoothWeak, with_finest(smooth(finest, opts.smooth_weak_iterations))),
         (Rung::SmoothStrong, with_finest(smooth(finest, opts.smooth_strong_iterations))),
@@ -147,8 +163,19 @@ pub fn degrade(levels: &[Level], opts: &LadderOptions) -> Result<Vec<(Rung, Vec<
         (Rung::Fragment, fragment(levels, opts.fragment_removed)),
         (Rung::Torn, torn(levels, opts.torn_holes, opts.torn_radius, opts.seed)),
         (Rung::Shrunken, levels.iter().map(|l| shrunken(l, finest, opts.shrink)).collect()),
-    ])
+        (Rung::Slit, slit(levels, opts.slit_width)),
+    ];
+    if let Some(r) = roof_strip(levels, opts.roof_strip_width) {
+        rungs.push((Rung::RoofStrip, r));
+    }
+    Ok(rungs)
 }
+
+/// Voxels (of the 64^3 level) in a patch of upper skin the roof strip
+/// removes, at the least, per voxel of its width: a strip must run this far
+/// across a roof to tear it (shorter patches are the tops of walls or
+/// merlons: notches, the exemplar's own kind of ruin).
+pub const ROOF_STRIP_MIN_LENGTH: f32 = 8.0;
 
 /// The index of the finest level of at most `resolution`^3 (level 0 if all
 /// are finer).
@@ -244,6 +271,111 @@ pub fn torn(levels: &[Level], holes: usize, radius: f32, seed: u64) -> Vec<Level
         .filter(|c| centres.iter().all(|h| h.distance(c.as_vec3()) > radius))
         .collect();
     carry(levels, k, &kept, k)
+}
+
+/// The 64^3 level's voxel centres (voxel units), the exemplar's up axis and
+/// one horizontal direction, and the centroid: where the slit and the roof
+/// strip are cut.
+fn cut_frame(level: &Level) -> (Vec<usize>, Vec3, Vec3, Vec3) {
+    let act = active(level);
+    let up = level.frame.up.axis();
+    let across = up.any_orthonormal_vector();
+    let centroid = act.iter().fold(Vec3::ZERO, |a, &i| a + level.coords[i].as_vec3() + Vec3::splat(0.5)) / act.len().max(1) as f32;
+    (act, up, across, centroid)
+}
+
+/// The slit rung: the 64^3 voxels whose centres lie within `width` / 2 of the
+/// vertical half-plane from the centroid's vertical axis outwards (along one
+/// horizontal direction) removed, from the bottom to the top, and the cut
+/// carried to every finer level.
+pub fn slit(levels: &[Level], width: f32) -> Vec<Level> {
+    let k = level_at(levels, 64);
+    let level = &levels[k];
+    let (act, up, across, centroid) = cut_frame(level);
+    let outwards = up.cross(across);
+    let kept: std::collections::HashSet<IVec3> = act
+        .iter()
+        .map(|&i| level.coords[i])
+        .filter(|c| {
+            let d = c.as_vec3() + Vec3::splat(0.5) - centroid;
+            !(d.dot(outwards) > 0.0 && d.dot(across).abs() < width / 2.0)
+        })
+        .collect();
+    carry(levels, k, &kept, k)
+}
+
+/// The roof-strip rung: within a strip `width` voxels wide across the whole
+/// 64^3 level (centres within `width` / 2 of a vertical plane one quarter of
+/// the way from the centroid to the shape's edge, so that it misses a central
+/// spire), each column's upper skin removed: the voxels facing upwards
+/// (normal within 70 degrees of up) within 2 voxels of the column's topmost
+/// voxel. Only patches (26-connected) of at least [`ROOF_STRIP_MIN_LENGTH`]
+/// x `width` voxels are removed; None when there is none (the exemplar has no
+/// roof). The cut is carried to every finer level.
+pub fn roof_strip(levels: &[Level], width: f32) -> Option<Vec<Level>> {
+    let k = level_at(levels, 64);
+    let level = &levels[k];
+    let (act, up, across, centroid) = cut_frame(level);
+    let reach = act.iter().map(|&i| (level.coords[i].as_vec3() + Vec3::splat(0.5) - centroid).dot(across)).fold(0.0, f32::max);
+    let plane = 0.25 * reach;
+    let height = |c: IVec3| c.as_vec3().dot(up);
+    let column = |c: IVec3| c - (c.as_vec3().dot(up).round() as i32) * up.as_ivec3();
+    let in_strip = |c: IVec3| ((c.as_vec3() + Vec3::splat(0.5) - centroid).dot(across) - plane).abs() < width / 2.0;
+    let mut top: VoxelMap<f32> = VoxelMap::default();
+    for &i in &act {
+        let c = level.coords[i];
+        if in_strip(c) {
+            let t = top.get(column(c)).copied().unwrap_or(f32::NEG_INFINITY).max(height(c));
+            top.insert(column(c), t);
+        }
+    }
+    let skin: Vec<IVec3> = act
+        .iter()
+        .filter(|&&i| {
+            let c = level.coords[i];
+            in_strip(c) && level.normals[i].dot(up) > 0.34 && top.get(column(c)).is_some_and(|&t| height(c) >= t - 2.0)
+        })
+        .map(|&i| level.coords[i])
+        .collect();
+    let removed = large_patches(&skin, (ROOF_STRIP_MIN_LENGTH * width).ceil() as usize);
+    if removed.is_empty() {
+        return None;
+    }
+    let kept: std::collections::HashSet<IVec3> =
+        act.iter().map(|&i| level.coords[i]).filter(|c| !removed.contains(c)).collect();
+    Some(carry(levels, k, &kept, k))
+}
+
+/// The voxels of `coords` in 26-connected patches of at least `min` voxels.
+fn large_patches(coords: &[IVec3], min: usize) -> std::collections::HashSet<IVec3> {
+    let set: std::collections::HashSet<IVec3> = coords.iter().copied().collect();
+    let mut seen = std::collections::HashSet::new();
+    let mut out = std::collections::HashSet::new();
+    for &start in coords {
+        if !seen.insert(start) {
+            continue;
+        }
+        let mut patch = vec![start];
+        let mut next = 0;
+        while next < patch.len() {
+            let c = patch[next];
+            next += 1;
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        let d = c + IVec3::new(dx, dy, dz);
+                        if set.contains(&d) && seen.insert(d) {
+                            patch.push(d);
+                        }
+                    }
+                }
+            }
+        }
+        if patch.len() >= min {
+            out.extend(patch);
+        }
+    }
+    out
 }
 
 /// One level of the shrunken rung: its surface points scaled by `factor`
@@ -450,7 +582,7 @@ pub struct Expectation {
 
 const GEOMETRY_RUNGS: &[Rung] = &[Rung::SmoothWeak, Rung::SmoothStrong, Rung::Blob, Rung::Untrained];
 /// The structural faults of coarse networks.
-const STRUCTURE_RUNGS: &[Rung] = &[Rung::Fragment, Rung::Torn, Rung::Shrunken];
+const STRUCTURE_RUNGS: &[Rung] = &[Rung::Fragment, Rung::Torn, Rung::Shrunken, Rung::Slit, Rung::RoofStrip];
 
 /// A structure figure of a row; NaN (fails every check) when not measured.
 fn structure(v: &VariantScores, f: fn(&crate::level::structure::StructureScores) -> f64) -> f64 {
@@ -489,6 +621,9 @@ pub fn expectations() -> Vec<Expectation> {
         e("structure.free_boundary", |v: &VariantScores| structure(v, |s| s.free_boundary), false, |ex| {
             structure(ex, |s| crate::level::structure::StructureParams::default().free_boundary_limit(s.free_boundary) - s.free_boundary)
         }, &[Fragment, Torn], false, false),
+        e("structure.seen_through_excess", |v: &VariantScores| structure(v, |s| s.seen_through_excess), false, |_| {
+            crate::level::structure::StructureParams::default().max_seen_through_excess
+        }, &[Slit, RoofStrip], false, false),
         e("colour.fscore", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.fscore), true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
         e("colour.precision", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.precision), true, m10, &[WashedOut, ShuffledColours, Untrained], false, true),
         e("colour.coverage", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.coverage), true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
@@ -560,11 +695,13 @@ pub fn check(rows: &[VariantScores], colourful: bool) -> Vec<CheckResult> {
 pub fn check_flags(rows: &[VariantScores]) -> Vec<CheckResult> {
     use crate::level::structure::Flag;
     use Rung::*;
-    let expected: [(Rung, Option<Flag>, &str); 8] = [
+    let expected: [(Rung, Option<Flag>, &str); 10] = [
         (Exemplar, Some(Flag::NearCopy), "flagged near_copy, nothing broken"),
         (Fragment, Some(Flag::Fragment), "flagged fragment"),
         (Torn, Some(Flag::Torn), "flagged torn"),
         (Shrunken, Some(Flag::Shrunken), "flagged shrunken"),
+        (Slit, Some(Flag::SeenThrough), "flagged seen_through"),
+        (RoofStrip, Some(Flag::SeenThrough), "flagged seen_through"),
         (SmoothWeak, None, "nothing broken"),
         (WashedOut, None, "nothing broken"),
         (ShuffledColours, None, "nothing broken"),

@@ -6,6 +6,7 @@
 
 pub mod edit;
 pub mod files;
+pub mod seen_through;
 pub mod structure;
 
 use glam::{DVec3, IVec3, Vec3};

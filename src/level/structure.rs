@@ -48,6 +48,10 @@ pub struct Structure {
     /// Share of the directions from the voxels' centroid in which the
     /// surface is met ([`enclosure`]).
     pub enclosure: f64,
+    /// Per view, the share of the silhouette where the inside is seen
+    /// ([`super::seen_through::seen_through`]; empty below 32^3).
+    #[serde(default)]
+    pub seen_through: Vec<f64>,
 }
 
 impl Structure {
@@ -66,6 +70,7 @@ impl Structure {
             components: components(&coords),
             free_boundary: free_boundary(level).iter().filter(|&&b| b).count(),
             enclosure: enclosure(&coords),
+            seen_through: super::seen_through::seen_through(level),
         }
     }
 
@@ -258,13 +263,20 @@ pub struct StructureParams {
     /// Enclosure below this share of the exemplar's: open.
     pub min_enclosure_ratio: f64,
     /// Boundary F-score (1-voxel tolerance) to the exemplar at or above
-    /// which a variant is a near copy.
+    /// which a variant is a near copy, unless it also differs in one place
+    /// of at least `copy_max_change` of the exemplar's surface
+    /// ([`largest_change`]: a ruin, a wing of its own).
     pub copy_fscore: f64,
+    pub copy_max_change: f64,
+    /// More of the inside seen than the exemplar shows, in some view (a
+    /// share of the silhouette, [`super::seen_through::seen_through_excess`]):
+    /// split open or torn through.
+    pub max_seen_through_excess: f64,
 }
 
 impl Default for StructureParams {
     fn default() -> Self {
-        StructureParams { min_mass_ratio: 0.8, min_extent_ratio: 0.8, free_boundary_ratio: 1.15, free_boundary_slack: 0.002, min_enclosure_ratio: 0.85, copy_fscore: 0.95 }
+        StructureParams { min_mass_ratio: 0.8, min_extent_ratio: 0.8, free_boundary_ratio: 1.15, free_boundary_slack: 0.002, min_enclosure_ratio: 0.85, copy_fscore: 0.95, copy_max_change: 0.04, max_seen_through_excess: 0.03 }
     }
 }
 
@@ -291,6 +303,9 @@ pub enum Flag {
     /// Surrounds much less of its centre than the exemplar does: a side
     /// gone, a wall standing alone, a hole through a roof.
     Open,
+    /// Shows more of its inside than the exemplar does, through a slit
+    /// along its height, a missing strip of roof, a hole in a closed shell.
+    SeenThrough,
     /// Nearly the exemplar itself.
     NearCopy,
 }
@@ -303,6 +318,7 @@ impl Flag {
             Flag::Pieces => "pieces",
             Flag::Torn => "torn",
             Flag::Open => "open",
+            Flag::SeenThrough => "seen_through",
             Flag::NearCopy => "near_copy",
         }
     }
@@ -330,11 +346,19 @@ pub struct StructureScores {
     pub exemplar_free_boundary: f64,
     /// Enclosure ([`enclosure`]), variant / exemplar.
     pub enclosure_ratio: f64,
+    /// How much more of its inside the variant shows than the exemplar, in
+    /// the view where it shows most more (share of the silhouette).
+    #[serde(default)]
+    pub seen_through_excess: f64,
     /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
     /// (1: the exemplar's surface, voxel for voxel).
     pub copy_fscore: f64,
+    /// The largest connected place where the variant differs from the
+    /// exemplar, a share of the exemplar's surface voxels ([`largest_change`]).
+    #[serde(default)]
+    pub largest_change: f64,
     /// One figure in [0, 1], 1 = the exemplar's structure: the worst of the
-    /// mass, extent, piece, free-boundary and enclosure terms
+    /// mass, extent, piece, free-boundary, enclosure and seen-through terms
     /// ([`StructureScores::new`]).
     pub score: f64,
     pub flags: Vec<Flag>,
@@ -347,7 +371,8 @@ impl StructureScores {
     /// min(r, 1/r); pieces (largest share of the variant / the exemplar's,
     /// at most 1); free boundary (the torn limit
     /// [`StructureParams::free_boundary_limit`] / the variant's share, at most
-    /// 1: below 1 exactly when flagged torn); enclosure (variant / exemplar, at most 1).
+    /// 1: below 1 exactly when flagged torn); enclosure (variant / exemplar, at most 1);
+    /// seen through (the limit / the excess, at most 1: below 1 exactly when flagged).
     pub fn new(shape_level: &Level, s: &Structure, exemplar_level: &Level, e: &Structure, p: &StructureParams) -> Self {
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
         let sym = |r: f64| if r > 0.0 { r.min(1.0 / r) } else { 0.0 };
@@ -356,14 +381,17 @@ impl StructureScores {
         let extent_ratio = axis_ratios.iter().copied().fold(f64::INFINITY, f64::min);
         let (fb, efb) = (s.free_boundary_share(), e.free_boundary_share());
         let enclosure_ratio = ratio(s.enclosure, e.enclosure);
+        let seen_through_excess = super::seen_through::seen_through_excess(&s.seen_through, &e.seen_through);
         let terms = [
             sym(mass_ratio),
             axis_ratios.iter().map(|&r| sym(r)).fold(1.0, f64::min),
             (ratio(s.largest_share(), e.largest_share())).min(1.0),
             if fb > 0.0 { (p.free_boundary_limit(efb) / fb).min(1.0) } else { 1.0 },
             enclosure_ratio.min(1.0),
+            if seen_through_excess > 0.0 { (p.max_seen_through_excess / seen_through_excess).min(1.0) } else { 1.0 },
         ];
         let copy_fscore = tolerant_fscore(shape_level, exemplar_level);
+        let largest_change = largest_change(shape_level, exemplar_level);
         let mut flags = Vec::new();
         if mass_ratio < p.min_mass_ratio || mass_ratio > 1.0 / p.min_mass_ratio {
             flags.push(Flag::Fragment);
@@ -380,7 +408,10 @@ impl StructureScores {
         if enclosure_ratio < p.min_enclosure_ratio {
             flags.push(Flag::Open);
         }
-        if copy_fscore >= p.copy_fscore {
+        if seen_through_excess > p.max_seen_through_excess {
+            flags.push(Flag::SeenThrough);
+        }
+        if copy_fscore >= p.copy_fscore && largest_change < p.copy_max_change {
             flags.push(Flag::NearCopy);
         }
         StructureScores {
@@ -392,7 +423,9 @@ impl StructureScores {
             free_boundary: fb,
             exemplar_free_boundary: efb,
             enclosure_ratio,
+            seen_through_excess,
             copy_fscore,
+            largest_change,
             score: terms.iter().copied().fold(1.0, f64::min),
             flags,
         }
@@ -402,6 +435,30 @@ impl StructureScores {
     pub fn whole(&self) -> bool {
         !self.flags.iter().any(|f| f.broken())
     }
+}
+
+/// The largest place where shape `a` differs from `b` (same resolution): the
+/// voxels of either with no voxel of the other within 1 voxel (Chebyshev),
+/// grouped into 26-connected regions, the largest region's size as a share of
+/// `b`'s voxels (0 for the same surface; 0 when `b` is empty). A copy with its
+/// surface jittered differs in many small places; a tower with a ruin of its
+/// own differs in one large one.
+pub fn largest_change(a: &Level, b: &Level) -> f64 {
+    let set = |l: &Level| -> HashSet<IVec3> { (0..l.len()).filter(|&i| l.mask[i] > 0.0).map(|i| l.coords[i]).collect() };
+    let (sa, sb) = (set(a), set(b));
+    if sb.is_empty() {
+        return 0.0;
+    }
+    let near = |c: IVec3, to: &HashSet<IVec3>| to.contains(&c) || NEIGHBOURS_26.iter().any(|&d| to.contains(&(c + d)));
+    let changed: Vec<IVec3> = sa
+        .iter()
+        .filter(|&&c| !near(c, &sb))
+        .chain(sb.iter().filter(|&&c| !near(c, &sa)))
+        .copied()
+        .collect();
+    // A voxel of `a` and one of `b` may share a coordinate only if both
+    // matched, so `changed` holds no duplicates.
+    components(&changed).first().map_or(0.0, |&c| c as f64 / sb.len() as f64)
 }
 
 /// F-score of two levels' surface voxels (same resolution) where a voxel

@@ -66,6 +66,13 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
     let options = LadderOptions::default();
     let mut rungs = ladder::degrade(&levels, &options)?;
     let mut skipped = Vec::new();
+    if !rungs.iter().any(|(r, _)| *r == Rung::RoofStrip) {
+        skipped.push(format!(
+            "roof_strip: no upper skin runs {} voxels across at 64^3 (no roof to tear)",
+            crate::eval::ladder::ROOF_STRIP_MIN_LENGTH
+        ));
+        let _ = std::fs::remove_dir_all(out.join(Rung::RoofStrip.name()));
+    }
     match config {
         Some(config) => {
             let t = Instant::now();
