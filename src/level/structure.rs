@@ -323,9 +323,12 @@ impl Flag {
         }
     }
     /// Whether the flag says the shape is not whole (a near copy is whole,
-    /// just not new).
+    /// just not new). `seen_through` is reported but does not yet count: on
+    /// the first real tower run (cpu profile, 10 variants) it agreed with the
+    /// eye on 6 of 10 (three whole towers flagged, one opened base missed),
+    /// so it must not drive the sampling's rejection until it is tuned.
     pub fn broken(self) -> bool {
-        !matches!(self, Flag::NearCopy)
+        !matches!(self, Flag::NearCopy | Flag::SeenThrough)
     }
 }
 
