@@ -198,8 +198,7 @@ const OPEN_SECTORS: usize = 3;
 /// voxel inside a surface has neighbours all round; a sharp crease keeps its
 /// neighbours on both faces (within the window, near the plane of either).
 pub fn free_boundary(level: &Level) -> Vec<bool> {
-    let index: VoxelMap<usize> =
-        (0..level.len()).filter(|&i| level.mask[i] > 0.0).map(|i| (level.coords[i], i)).collect();
+    let index: VoxelMap<usize> = (0..level.len()).filter(|&i| level.mask[i] > 0.0).map(|i| (level.coords[i], i)).collect();
     let point = |i: usize| level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i];
     (0..level.len())
         .into_par_iter()
@@ -215,7 +214,9 @@ pub fn free_boundary(level: &Level) -> Vec<bool> {
             for dz in -2..=2 {
                 for dy in -2..=2 {
                     for dx in -2..=2 {
-                        let Some(&j) = index.get(level.coords[i] + IVec3::new(dx, dy, dz)) else { continue };
+                        let Some(&j) = index.get(level.coords[i] + IVec3::new(dx, dy, dz)) else {
+                            continue;
+                        };
                         if j == i || level.normals[j].dot(n) <= 0.0 {
                             continue;
                         }
@@ -276,7 +277,16 @@ pub struct StructureParams {
 
 impl Default for StructureParams {
     fn default() -> Self {
-        StructureParams { min_mass_ratio: 0.8, min_extent_ratio: 0.8, free_boundary_ratio: 1.15, free_boundary_slack: 0.002, min_enclosure_ratio: 0.85, copy_fscore: 0.95, copy_max_change: 0.04, max_seen_through_excess: 0.03 }
+        StructureParams {
+            min_mass_ratio: 0.8,
+            min_extent_ratio: 0.8,
+            free_boundary_ratio: 1.15,
+            free_boundary_slack: 0.002,
+            min_enclosure_ratio: 0.85,
+            copy_fscore: 0.95,
+            copy_max_change: 0.04,
+            max_seen_through_excess: 0.03,
+        }
     }
 }
 
@@ -391,10 +401,14 @@ impl StructureScores {
             (ratio(s.largest_share(), e.largest_share())).min(1.0),
             if fb > 0.0 { (p.free_boundary_limit(efb) / fb).min(1.0) } else { 1.0 },
             enclosure_ratio.min(1.0),
-            if seen_through_excess > 0.0 { (p.max_seen_through_excess / seen_through_excess).min(1.0) } else { 1.0 },
+            if seen_through_excess > 0.0 {
+                (p.max_seen_through_excess / seen_through_excess).min(1.0)
+            } else {
+                1.0
+            },
         ];
-        let copy_fscore = tolerant_fscore(shape_level, exemplar_level);
-        let largest_change = largest_change(shape_level, exemplar_level);
+        let matching = Matching::of(shape_level, exemplar_level);
+        let (copy_fscore, largest_change) = (matching.fscore(), matching.largest_change());
         let mut flags = Vec::new();
         if mass_ratio < p.min_mass_ratio || mass_ratio > 1.0 / p.min_mass_ratio {
             flags.push(Flag::Fragment);
@@ -447,41 +461,68 @@ impl StructureScores {
 /// surface jittered differs in many small places; a tower with a ruin of its
 /// own differs in one large one.
 pub fn largest_change(a: &Level, b: &Level) -> f64 {
-    let set = |l: &Level| -> HashSet<IVec3> { (0..l.len()).filter(|&i| l.mask[i] > 0.0).map(|i| l.coords[i]).collect() };
-    let (sa, sb) = (set(a), set(b));
-    if sb.is_empty() {
-        return 0.0;
-    }
-    let near = |c: IVec3, to: &HashSet<IVec3>| to.contains(&c) || NEIGHBOURS_26.iter().any(|&d| to.contains(&(c + d)));
-    let changed: Vec<IVec3> = sa
-        .iter()
-        .filter(|&&c| !near(c, &sb))
-        .chain(sb.iter().filter(|&&c| !near(c, &sa)))
-        .copied()
-        .collect();
-    // A voxel of `a` and one of `b` may share a coordinate only if both
-    // matched, so `changed` holds no duplicates.
-    components(&changed).first().map_or(0.0, |&c| c as f64 / sb.len() as f64)
+    Matching::of(a, b).largest_change()
 }
 
 /// F-score of two levels' surface voxels (same resolution) where a voxel
 /// counts as matched when the other set has a voxel within 1 voxel
 /// (Chebyshev): 1 for the same surface, low for a shape that is elsewhere.
 pub fn tolerant_fscore(a: &Level, b: &Level) -> f64 {
-    let set = |l: &Level| -> HashSet<IVec3> { (0..l.len()).filter(|&i| l.mask[i] > 0.0).map(|i| l.coords[i]).collect() };
-    let (sa, sb) = (set(a), set(b));
-    if sa.is_empty() || sb.is_empty() {
-        return 0.0;
+    Matching::of(a, b).fscore()
+}
+
+impl Matching {
+    fn largest_change(&self) -> f64 {
+        let m = self;
+        if m.b_voxels == 0 {
+            return 0.0;
+        }
+        // A voxel of `a` and one of `b` share a coordinate only if both matched,
+        // so the unmatched voxels hold no duplicates.
+        let changed: Vec<IVec3> = m.a_unmatched.iter().chain(&m.b_unmatched).copied().collect();
+        components(&changed).first().map_or(0.0, |&c| c as f64 / m.b_voxels as f64)
     }
-    let matched = |from: &HashSet<IVec3>, to: &HashSet<IVec3>| {
-        from.iter().filter(|&&c| to.contains(&c) || NEIGHBOURS_26.iter().any(|&d| to.contains(&(c + d)))).count() as f64
-            / from.len() as f64
-    };
-    let (precision, recall) = (matched(&sa, &sb), matched(&sb, &sa));
-    if precision + recall == 0.0 {
-        0.0
-    } else {
-        2.0 * precision * recall / (precision + recall)
+
+    fn fscore(&self) -> f64 {
+        let m = self;
+        if m.a_voxels == 0 || m.b_voxels == 0 {
+            return 0.0;
+        }
+        let precision = 1.0 - m.a_unmatched.len() as f64 / m.a_voxels as f64;
+        let recall = 1.0 - m.b_unmatched.len() as f64 / m.b_voxels as f64;
+        if precision + recall == 0.0 {
+            0.0
+        } else {
+            2.0 * precision * recall / (precision + recall)
+        }
+    }
+}
+
+/// Two levels' surface voxels matched both ways with a 1-voxel (Chebyshev)
+/// tolerance: the voxels of each with none of the other within 1 voxel.
+struct Matching {
+    a_voxels: usize,
+    b_voxels: usize,
+    a_unmatched: Vec<IVec3>,
+    b_unmatched: Vec<IVec3>,
+}
+
+impl Matching {
+    fn of(a: &Level, b: &Level) -> Matching {
+        let set = |l: &Level| -> HashSet<IVec3> { (0..l.len()).filter(|&i| l.mask[i] > 0.0).map(|i| l.coords[i]).collect() };
+        let (sa, sb) = (set(a), set(b));
+        let unmatched = |from: &HashSet<IVec3>, to: &HashSet<IVec3>| -> Vec<IVec3> {
+            from.iter()
+                .filter(|&&c| !(to.contains(&c) || NEIGHBOURS_26.iter().any(|&d| to.contains(&(c + d)))))
+                .copied()
+                .collect()
+        };
+        Matching {
+            a_voxels: sa.len(),
+            b_voxels: sb.len(),
+            a_unmatched: unmatched(&sa, &sb),
+            b_unmatched: unmatched(&sb, &sa),
+        }
     }
 }
 
