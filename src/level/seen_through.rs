@@ -20,8 +20,9 @@
 //! Marked regions smaller than a few voxels are dropped (gaps between stones,
 //! crenels). The exemplar has its own doorways, arrow slits and open tops, so a
 //! shape is judged by how much MORE it shows than the exemplar
-//! ([`seen_through_excess`]), view band by view band with the views of a band
-//! sorted, so that a doorway turned to another side is not a tear.
+//! ([`seen_through_excess`]), view band by view band, the band's worst views
+//! against the exemplar's worst, so that a doorway turned to another side is
+//! not a tear.
 //!
 //! Lengths are in voxels of the level measured and scale with its resolution
 //! against [`super::structure::STRUCTURE_RESOLUTION`].
@@ -32,13 +33,16 @@ use rayon::prelude::*;
 use super::structure::STRUCTURE_RESOLUTION;
 use super::Level;
 
-/// Elevations of the view bands, degrees above the horizontal; a top view is
-/// added as a band of its own.
+/// Elevations of the view bands, degrees above the horizontal. No top view:
+/// see [`seen_through_excess`].
 pub const ELEVATIONS_DEG: [f32; 3] = [-20.0, 15.0, 50.0];
 /// Views per band, evenly spread in azimuth about the exemplar's up axis.
 pub const AZIMUTHS: usize = 8;
-/// Views in all: the bands, then the top view.
-pub const VIEWS: usize = ELEVATIONS_DEG.len() * AZIMUTHS + 1;
+/// Views per band whose shares [`seen_through_excess`] compares: a slit or a
+/// torn roof shows in about this many of a band's views.
+pub const WORST_VIEWS: usize = 3;
+/// Views in all, band after band.
+pub const VIEWS: usize = ELEVATIONS_DEG.len() * AZIMUTHS;
 
 /// Image pixel, voxels.
 const PIXEL: f32 = 0.5;
@@ -56,7 +60,7 @@ const BACK_FACING_COS: f32 = -0.5;
 /// Marked regions smaller than this are dropped, square voxels at 64^3.
 const MIN_REGION: f32 = 12.0;
 
-/// Per view ([`VIEWS`], bands first), the share of the silhouette's pixels
+/// Per view ([`VIEWS`], band after band), the share of the silhouette's pixels
 /// where the inside is seen. Empty for a level coarser than 32^3 (too few
 /// voxels across for a slit) or without surface.
 pub fn seen_through(level: &Level) -> Vec<f64> {
@@ -95,7 +99,6 @@ fn view_directions(up: Vec3) -> Vec<Vec3> {
             out.push((side * a.cos() + other * a.sin()) * e.cos() + up * e.sin());
         }
     }
-    out.push(up);
     out
 }
 
@@ -245,28 +248,32 @@ fn large_regions(marked: &[bool], n: usize, min_pixels: usize) -> Vec<bool> {
 }
 
 /// How much more of the inside a shape shows than the exemplar: per view band
-/// (the elevations of [`ELEVATIONS_DEG`], then the top view), both shapes'
-/// shares sorted from most to least, the largest excess of the shape's over
-/// the exemplar's at the same rank (a share of the silhouette; 0 when it shows
-/// no more anywhere, or when either was not measured).
+/// (the elevations of [`ELEVATIONS_DEG`]), the mean share of the band's
+/// [`WORST_VIEWS`] views showing the most, the shape's less the exemplar's;
+/// the largest over the bands (a share of the silhouette; 0 when it shows no
+/// more anywhere, or when either was not measured).
+///
+/// Why these choices, measured on a real tower run and the ladder's rungs on
+/// seven meshes: a slit or a torn roof shows in two to four views of a band,
+/// so the mean of the band's worst views sees it where the mean of all eight
+/// dilutes it; comparing views rank by rank instead read noise in the
+/// exemplar's quiet views (0 against 0.06) as tears on variants a person calls
+/// whole. The top view is not compared: looking down a ruin's own split along
+/// its height (narrower than the exemplar's in a sound variant) reads as a
+/// crack, and the 50-degree band already sees a torn roof.
 pub fn seen_through_excess(shape: &[f64], exemplar: &[f64]) -> f64 {
     if shape.len() != VIEWS || exemplar.len() != VIEWS {
         return 0.0;
     }
-    let bands = (0..ELEVATIONS_DEG.len()).map(|b| b * AZIMUTHS..(b + 1) * AZIMUTHS).chain([VIEWS - 1..VIEWS]);
-    let mut excess: f64 = 0.0;
-    for band in bands {
-        let sorted = |v: &[f64]| {
-            let mut s = v[band.clone()].to_vec();
-            s.sort_by(|a, b| b.total_cmp(a));
-            s
-        };
-        let (s, e) = (sorted(shape), sorted(exemplar));
-        for (a, b) in s.iter().zip(&e) {
-            excess = excess.max(a - b);
-        }
-    }
-    excess
+    let worst = |v: &[f64], band: usize| {
+        let mut s = v[band * AZIMUTHS..(band + 1) * AZIMUTHS].to_vec();
+        s.sort_by(|a, b| b.total_cmp(a));
+        s[..WORST_VIEWS].iter().sum::<f64>() / WORST_VIEWS as f64
+    };
+    (0..ELEVATIONS_DEG.len())
+        .map(|b| worst(shape, b) - worst(exemplar, b))
+        .fold(f64::NEG_INFINITY, f64::max)
+        .max(0.0)
 }
 
 #[cfg(test)]
@@ -341,13 +348,14 @@ mod tests {
         // above it shows the inner faces of its walls over its rim: an open
         // top, the exemplar's own).
         assert!(w[0..8].iter().all(|&v| v < 0.01), "{w:?}");
+        let flagged = crate::level::structure::StructureParams::default().max_seen_through_excess;
         let excess = seen_through_excess(&s, &w);
-        assert!(excess > 0.03, "slit excess {excess}: {s:?}");
+        assert!(excess > flagged, "slit excess {excess}: {s:?}");
         assert_eq!(seen_through_excess(&w, &w), 0.0);
         // Turned about the up axis, it is the same tower.
         let turned = tower(|c| !(c.z == 43 || c.z == 42 || c.z == 41) || !(31..=32).contains(&c.x));
         let t = seen_through(&turned);
-        assert!(seen_through_excess(&t, &s) < 0.02, "{t:?} vs {s:?}");
+        assert!(seen_through_excess(&t, &s) < flagged / 4.0, "{t:?} vs {s:?}");
     }
 
     #[test]
@@ -374,6 +382,7 @@ mod tests {
         };
         let (whole, holed) = (seen_through(&sphere(false)), seen_through(&sphere(true)));
         assert!(whole.iter().all(|&v| v < 0.01), "{whole:?}");
-        assert!(seen_through_excess(&holed, &whole) > 0.05, "{holed:?}");
+        let flagged = crate::level::structure::StructureParams::default().max_seen_through_excess;
+        assert!(seen_through_excess(&holed, &whole) > flagged, "{holed:?}");
     }
 }
