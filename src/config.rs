@@ -296,18 +296,73 @@ pub struct SampleConfig {
     pub final_step: crate::learn::schedule::FinalStep,
     /// Level-0 shapes sampled per variant, at most (1: no rejection): each
     /// is kept only when its structure against the exemplar's level 0
-    /// scores at least `level0_min_structure`; the first that does is the
-    /// variant's, else the best. 16^3 costs little, and a broken coarse
-    /// shape is what no finer level mends.
+    /// scores at least `level0_min_structure`; which of those is the
+    /// variant's is `level0_pick`; when none does, the best. 16^3 costs
+    /// little, and a broken coarse shape is what no finer level mends.
     #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
     pub level0_candidates: usize,
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub level0_min_structure: f64,
+    /// Which of the level-0 candidates that reach `level0_min_structure`
+    /// the variant keeps: the first, or the one least like the exemplar's
+    /// level 0 (all candidates are drawn). A level-0 network that learned
+    /// its one exemplar draws it again most of the time; the finer levels
+    /// then copy it too.
+    #[serde(default, skip_serializing_if = "Level0Pick::is_default")]
+    pub level0_pick: Level0Pick,
+    /// The reverse process at level 0, when it differs from `sampler`
+    /// (DDPM's fresh noise at every step strays from the learned shape
+    /// where deterministic DDIM returns to it).
+    #[serde(default, skip_serializing_if = "Level0Sampler::is_default")]
+    pub level0_sampler: Level0Sampler,
     /// Coarse-to-fine passes per variant at most (1: one pass): until one
     /// is whole (no fragment, shrunken, pieces, torn or open flag) at the
     /// structure level (64^3); else the best is kept.
     #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
     pub attempts: usize,
+}
+
+/// Which level-0 candidate a variant keeps (`sample.level0_pick`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Level0Pick {
+    /// The first whose structure passes.
+    #[default]
+    First,
+    /// Of those whose structure passes, the least like the exemplar's level 0.
+    Novel,
+}
+
+impl Level0Pick {
+    fn is_default(&self) -> bool {
+        *self == Level0Pick::First
+    }
+}
+
+/// The reverse process at level 0 (`sample.level0_sampler`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Level0Sampler {
+    /// `sample.sampler`, as at every level.
+    #[default]
+    Same,
+    Ddpm,
+    Ddim,
+}
+
+impl Level0Sampler {
+    fn is_default(&self) -> bool {
+        *self == Level0Sampler::Same
+    }
+    /// The sampler level 0 uses, given the one of the other levels.
+    pub fn or(self, others: crate::learn::schedule::Sampler) -> crate::learn::schedule::Sampler {
+        use crate::learn::schedule::Sampler;
+        match self {
+            Level0Sampler::Same => others,
+            Level0Sampler::Ddpm => Sampler::Ddpm,
+            Level0Sampler::Ddim => Sampler::Ddim,
+        }
+    }
 }
 
 fn one_usize() -> usize {
@@ -377,8 +432,10 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 5] = [
+        let defaults: [(&str, &str, toml::Value); 7] = [
             ("sample", "final_step", toml::Value::String("prediction".into())),
+            ("sample", "level0_pick", toml::Value::String("first".into())),
+            ("sample", "level0_sampler", toml::Value::String("same".into())),
             ("sample", "level0_candidates", toml::Value::Integer(1)),
             ("sample", "level0_min_structure", toml::Value::Float(0.0)),
             ("sample", "attempts", toml::Value::Integer(1)),
@@ -699,6 +756,9 @@ mod tests {
             "sample.level0_candidates=1",
             "sample.level0_min_structure=0.0",
             "sample.attempts=1",
+            "sample.level0_pick=first",
+            "sample.level0_sampler=same",
+            "sample.level0_steps=50",
         ]
         .map(String::from)
         .to_vec();

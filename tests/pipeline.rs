@@ -204,9 +204,27 @@ fn sampling_is_reproducible_and_follows_options() {
     assert!(!same(&a, &c), "different seed, same output");
     assert!(!same(&a[0..1], &a[1..2]), "variants are identical");
     // ddpm works too
-    let d = sample(&models, &levels, &SampleOptions { sampler: shapeshifter::learn::schedule::Sampler::Ddpm, ..opts.clone() }, None).unwrap();
+    let ddpm = shapeshifter::learn::schedule::Sampler::Ddpm;
+    let d = sample(&models, &levels, &SampleOptions { sampler: ddpm, level0_sampler: ddpm, ..opts.clone() }, None).unwrap();
     assert_eq!(d[0].len(), 2);
     assert!(!same(&d, &a), "ddpm and ddim gave the same variants: the sampler setting is ignored");
+    // The novel level-0 pick keeps, of several candidates, one no more like
+    // the exemplar's level 0 than the variant's own first candidate (the one
+    // a single-candidate run keeps), and usually less.
+    let novel_opts = SampleOptions {
+        level0_candidates: 6,
+        level0_min_structure: 0.0,
+        level0_pick: shapeshifter::config::Level0Pick::Novel,
+        level0_sampler: ddpm,
+        stop_level: Some(0),
+        ..opts.clone()
+    };
+    let first_opts = SampleOptions { level0_candidates: 1, level0_pick: shapeshifter::config::Level0Pick::First, ..novel_opts.clone() };
+    let (novel, first) = (sample(&models, &levels, &novel_opts, None).unwrap(), sample(&models, &levels, &first_opts, None).unwrap());
+    let likeness = |v: &[Vec<Level>]| v.iter().map(|l| shapeshifter::level::structure::tolerant_fscore(&l[0], &levels[0])).collect::<Vec<f64>>();
+    let (ln, lf) = (likeness(&novel), likeness(&first));
+    assert!(ln.iter().zip(&lf).all(|(n, f)| n <= f), "a novel pick more like the exemplar than the first candidate: {ln:?} vs {lf:?}");
+    assert!(ln.iter().sum::<f64>() < lf.iter().sum::<f64>(), "the novel pick changed nothing: {ln:?}");
     // Clamped clean estimates: every sampled feature within its range.
     for v in a.iter().chain(&d) {
         for l in v {

@@ -2,12 +2,15 @@
 //!
 //! 1. Level 0: the dense box of the exemplar's level 0, resized per axis by
 //!    `extent` around its centre (the anisotropic control), filled with N(0, 1);
-//!    the reverse process from t = 1 with `level0_steps` steps; prune (mask > 0
-//!    kept, mask set to 1). With `level0_candidates` > 1, up to that many
-//!    level-0 shapes are drawn, each from its own noise, and the first whose
-//!    structure against the exemplar's level 0 ([`crate::level::structure`])
-//!    scores at least `level0_min_structure` is kept (else the best): no
-//!    variant starts from a tiny blob or three pieces.
+//!    the reverse process from t = 1 with `level0_steps` steps of
+//!    `level0_sampler`; prune (mask > 0 kept, mask set to 1). With
+//!    `level0_candidates` > 1, level-0 shapes are drawn, each from its own
+//!    noise; of those whose structure against the exemplar's level 0
+//!    ([`crate::level::structure`]) scores at least `level0_min_structure`,
+//!    the first is kept, or with `level0_pick = novel` the least like the
+//!    exemplar's level 0 (else the best scoring): no variant starts from a
+//!    tiny blob or three pieces, nor, where the network learned its exemplar
+//!    by heart, from the exemplar again.
 //!    With `attempts` > 1, the whole coarse-to-fine pass is repeated from
 //!    new level-0 noise until the variant is whole at the structure level
 //!    (64^3): the faults that level 0 cannot show yet (a
@@ -157,6 +160,10 @@ pub struct SampleOptions {
     /// must reach to be kept (see the module documentation).
     pub level0_candidates: usize,
     pub level0_min_structure: f64,
+    /// Which passing candidate is kept ([`crate::config::Level0Pick`]).
+    pub level0_pick: crate::config::Level0Pick,
+    /// The reverse process at level 0.
+    pub level0_sampler: Sampler,
     /// Coarse-to-fine passes per variant at most, until one is whole at the
     /// structure level (1: one pass, no check).
     pub attempts: usize,
@@ -178,6 +185,8 @@ impl SampleOptions {
             final_step: config.sample.final_step,
             level0_candidates: config.sample.level0_candidates,
             level0_min_structure: config.sample.level0_min_structure,
+            level0_pick: config.sample.level0_pick,
+            level0_sampler: config.sample.level0_sampler.or(config.sample.sampler),
             attempts: config.sample.attempts,
         }
     }
@@ -336,16 +345,23 @@ impl OneVariant<'_> {
         let bx = SparseGrid::full_box(resolution0, lo, size)?;
         let noise = gaussian(bx.len(), seed, 0, 0, self.models.device);
         let x = SparseTensor::new(Arc::new(bx), noise)?;
-        Ok(self.reverse(0, x, 1.0, opts.level0_steps, seed, opts.final_step)?.prune_by_mask()?)
+        Ok(self.reverse(0, x, 1.0, opts.level0_steps, seed, opts.final_step, opts.level0_sampler)?.prune_by_mask()?)
     }
 
-    /// Level 0 of this variant: the first of `level0_candidates` shapes whose
-    /// structure score reaches `level0_min_structure`, else the best.
+    /// Level 0 of this variant: of up to `level0_candidates` shapes, the
+    /// first whose structure score reaches `level0_min_structure` (pick
+    /// `first`), or of all that reach it the least like the exemplar's level 0
+    /// (pick `novel`: the lowest 1-voxel-tolerant F-score, then the largest
+    /// changed region); when none reaches it, the best scoring.
     fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<(SparseTensor, Level)> {
         let (ex_level, ex_structure) = self.exemplar0;
         let params = StructureParams::default();
-        let mut best: Option<(f64, SparseTensor, Level)> = None;
+        let novel = opts.level0_pick == crate::config::Level0Pick::Novel;
         let candidates = opts.level0_candidates.max(1);
+        // (score, x, level) of the best scoring; (likeness, k, x, level) of
+        // the least like the exemplar among those passing.
+        let mut best: Option<(f64, SparseTensor, Level)> = None;
+        let mut newest: Option<((f64, f64), usize, SparseTensor, Level)> = None;
         for k in 0..candidates {
             let x = self.level0(resolution0, candidate_seed(seed, k), opts)?;
             let level = x.to_level(0, self.frame)?;
@@ -357,26 +373,39 @@ impl OneVariant<'_> {
             } else {
                 StructureScores::new(&level, &Structure::of(&level), ex_level, ex_structure, &params).score
             };
-            log::debug!("level 0 candidate {k}: structure {score:.3}");
             let pass = score >= opts.level0_min_structure;
+            if pass && novel {
+                let m = crate::level::structure::Matching::of(&level, ex_level);
+                // Lower is less like the exemplar.
+                let likeness = (m.fscore(), -m.largest_change());
+                log::debug!("level 0 candidate {k}: structure {score:.3}, F {:.3}, change {:.3}", likeness.0, -likeness.1);
+                if newest.as_ref().is_none_or(|n| likeness < n.0) {
+                    newest = Some((likeness, k, x.with_feats(x.feats.shallow_clone())?, level.clone()));
+                }
+            } else {
+                log::debug!("level 0 candidate {k}: structure {score:.3}");
+            }
             if best.as_ref().is_none_or(|b| score > b.0) {
                 best = Some((score, x, level));
             }
-            if pass {
+            if pass && !novel {
                 if k > 0 {
                     log::info!("level 0: candidate {k} kept (structure {score:.3}), {k} rejected");
                 }
                 break;
             }
-            if k + 1 == candidates {
-                log::warn!(
-                    "level 0: none of {candidates} candidates reached structure {:.2}: the best ({:.3}) is kept",
-                    opts.level0_min_structure,
-                    best.as_ref().map_or(0.0, |b| b.0)
-                );
-            }
         }
-        let (_, x, level) = best.expect("at least one candidate");
+        if let Some(((f, change), k, x, level)) = newest {
+            log::info!("level 0: candidate {k} of {candidates} kept, the least like the exemplar (F {f:.3}, change {:.3})", -change);
+            return Ok((x, level));
+        }
+        let (score, x, level) = best.expect("at least one candidate");
+        if score < opts.level0_min_structure {
+            log::warn!(
+                "level 0: none of {candidates} candidates reached structure {:.2}: the best ({score:.3}) is kept",
+                opts.level0_min_structure
+            );
+        }
         Ok((x, level))
     }
 
@@ -464,7 +493,7 @@ impl OneVariant<'_> {
             let u = up.net.forward_t(&cur, false)?;
             let eps = gaussian(u.len(), seed, l, 0, dev);
             let x = u.with_feats(self.schedule.add_noise(&u.feats, opts.upper_t_max, &eps))?;
-            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps, seed, opts.final_step)?;
+            let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps, seed, opts.final_step, self.sampler)?;
             cur = x.prune_by_mask()?;
             out.push(cur.to_level(l, self.frame)?);
         }
@@ -473,7 +502,17 @@ impl OneVariant<'_> {
 
     /// The reverse process of level `l` from `t_max` to 0 in `steps` steps,
     /// its noise from `seed`; every clean estimate clamped per channel.
-    fn reverse(&self, l: usize, mut x: SparseTensor, t_max: f64, steps: usize, seed: u64, final_step: FinalStep) -> Result<SparseTensor> {
+    #[allow(clippy::too_many_arguments)]
+    fn reverse(
+        &self,
+        l: usize,
+        mut x: SparseTensor,
+        t_max: f64,
+        steps: usize,
+        seed: u64,
+        final_step: FinalStep,
+        sampler: Sampler,
+    ) -> Result<SparseTensor> {
         let net = &self.models.diffusion[l].net;
         let times = reverse_times(t_max, steps);
         for (k, w) in times.windows(2).enumerate() {
@@ -482,7 +521,7 @@ impl OneVariant<'_> {
             crate::util::interrupt::check()?;
             let x0_hat = clamp_to_feature_ranges(&net.forward_at(&x, w[0], false)?.feats);
             let noise = gaussian(x.len(), seed, l, k + 1, self.models.device);
-            let next = reverse_step(self.sampler, final_step, &self.schedule, &x.feats, &x0_hat, w[0], w[1], &noise);
+            let next = reverse_step(sampler, final_step, &self.schedule, &x.feats, &x0_hat, w[0], w[1], &noise);
             x = x.with_feats(next)?;
         }
         Ok(x)

@@ -474,7 +474,8 @@ pub fn tolerant_fscore(a: &Level, b: &Level) -> f64 {
 }
 
 impl Matching {
-    fn largest_change(&self) -> f64 {
+    /// [`largest_change`] of the two.
+    pub fn largest_change(&self) -> f64 {
         let m = self;
         if m.b_voxels == 0 {
             return 0.0;
@@ -485,7 +486,8 @@ impl Matching {
         components(&changed).first().map_or(0.0, |&c| c as f64 / m.b_voxels as f64)
     }
 
-    fn fscore(&self) -> f64 {
+    /// [`tolerant_fscore`] of the two.
+    pub fn fscore(&self) -> f64 {
         let m = self;
         if m.a_voxels == 0 || m.b_voxels == 0 {
             return 0.0;
@@ -502,7 +504,7 @@ impl Matching {
 
 /// Two levels' surface voxels matched both ways with a 1-voxel (Chebyshev)
 /// tolerance: the voxels of each with none of the other within 1 voxel.
-struct Matching {
+pub struct Matching {
     a_voxels: usize,
     b_voxels: usize,
     a_unmatched: Vec<IVec3>,
@@ -510,7 +512,7 @@ struct Matching {
 }
 
 impl Matching {
-    fn of(a: &Level, b: &Level) -> Matching {
+    pub fn of(a: &Level, b: &Level) -> Matching {
         let set = |l: &Level| -> HashSet<IVec3> { (0..l.len()).filter(|&i| l.mask[i] > 0.0).map(|i| l.coords[i]).collect() };
         let (sa, sb) = (set(a), set(b));
         let unmatched = |from: &HashSet<IVec3>, to: &HashSet<IVec3>| -> Vec<IVec3> {
