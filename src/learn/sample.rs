@@ -409,7 +409,8 @@ impl OneVariant<'_> {
             }
         }
         if let Some(((f, change), k, x, level)) = newest {
-            log::info!("level 0: candidate {k} of {candidates} kept, the least like the exemplar (F {f:.3}, change {:.3})", -change);
+            let why = if f < NEW_ENOUGH_LEVEL0_FSCORE { "new enough" } else { "the least like the exemplar of all" };
+            log::info!("level 0: candidate {k} of {candidates} kept, {why} (F {f:.3}, change {:.3} against the exemplar's level 0)", -change);
             return Ok((x, level));
         }
         let (score, x, level) = best.expect("at least one candidate");
