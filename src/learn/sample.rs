@@ -344,7 +344,7 @@ fn candidate_seed(seed: u64, k: usize) -> u64 {
 /// turned into near copies scored 0.990-1.000, those that became towers of
 /// their own 0.94-0.981; stopping there saves most of the draws (each a
 /// full reverse process at level 0).
-const NEW_ENOUGH_LEVEL0_FSCORE: f64 = 0.985;
+pub const NEW_ENOUGH_LEVEL0_FSCORE: f64 = 0.985;
 
 impl OneVariant<'_> {
     /// Level 0 from the noise of `seed`, pruned.
