@@ -6,7 +6,7 @@
 //!
 //! `cargo run --release --example level_novelty -- EXEMPLAR_DIR VARIANT_DIR...`
 
-use shapeshifter::level::structure::{largest_change, tolerant_fscore};
+use shapeshifter::level::structure::Matching;
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {
@@ -22,7 +22,8 @@ fn main() -> anyhow::Result<()> {
             .filter(|&&l| Path::new(d).join(format!("level_{l}.vdb")).exists())
             .map(|&l| {
                 let v = read(d, l)?;
-                Ok(format!("{:.3}/{:.3}", tolerant_fscore(&v, &exemplar[l]), largest_change(&v, &exemplar[l])))
+                let m = Matching::of(&v, &exemplar[l]);
+                Ok(format!("{:.3}/{:.3}", m.fscore(), m.largest_change()))
             })
             .collect::<anyhow::Result<_>>()?;
         println!("{d}  {}", cells.join("  "));

@@ -304,8 +304,8 @@ pub struct SampleConfig {
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub level0_min_structure: f64,
     /// Which of the level-0 candidates that reach `level0_min_structure`
-    /// the variant keeps: the first, or the one least like the exemplar's
-    /// level 0 (all candidates are drawn). A level-0 network that learned
+    /// the variant keeps: the first, or the first new enough against the
+    /// exemplar's level 0, else the least like it of all. A level-0 network that learned
     /// its one exemplar draws it again most of the time; the finer levels
     /// then copy it too.
     #[serde(default, skip_serializing_if = "Level0Pick::is_default")]
@@ -316,7 +316,7 @@ pub struct SampleConfig {
     #[serde(default, skip_serializing_if = "Level0Sampler::is_default")]
     pub level0_sampler: Level0Sampler,
     /// Coarse-to-fine passes per variant at most (1: one pass): until one
-    /// is whole (no fragment, shrunken, pieces, torn or open flag) at the
+    /// is whole (no fragment, shrunken, pieces, torn, open or seen_through flag) at the
     /// structure level (64^3); else the best is kept.
     #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
     pub attempts: usize,
@@ -329,7 +329,9 @@ pub enum Level0Pick {
     /// The first whose structure passes.
     #[default]
     First,
-    /// Of those whose structure passes, the least like the exemplar's level 0.
+    /// Of those whose structure passes, the first new enough against the
+    /// exemplar's level 0, else the least like it
+    /// ([`crate::learn::sample::NEW_ENOUGH_LEVEL0_FSCORE`]).
     Novel,
 }
 
