@@ -364,9 +364,9 @@ pub enum Command {
     /// Write the USD asset of a run folder (what `run` writes after meshing):
     /// each variant's variants/variant_NNN/variant.usda (mesh, finest
     /// level's points, level files as volumes) and DIR/variants.usda, one
-    /// asset prim with a variant set over them.
+    /// asset prim with a variant set over them (.usdc with --format usdc).
     ///
-    /// Example: shapeshifter usd out/tower --meters-per-unit 0.01
+    /// Example: shapeshifter usd out/tower --meters-per-unit 0.01 --format usdc
     Usd {
         /// A run folder (the output of `run`, or of its stages).
         dir: PathBuf,
@@ -374,6 +374,10 @@ pub enum Command {
         /// output.meters_per_unit, 1].
         #[arg(long)]
         meters_per_unit: Option<f64>,
+        /// usda (text) or usdc (binary) [default: the run's
+        /// output.usd_format, usda].
+        #[arg(long, value_enum)]
+        format: Option<shapeshifter::io::usd::UsdFormat>,
         /// Print what was written as JSON.
         #[arg(long)]
         json: bool,
@@ -442,7 +446,8 @@ pub enum StageCmd {
         #[arg(short, default_value_t = 10)]
         n: usize,
     },
-    /// USD layers of variants 0 .. N-1 and DIR/variants.usda.
+    /// USD layers of variants 0 .. N-1 and DIR/variants.usda (.usdc with
+    /// output.usd_format = "usdc").
     Usd {
         dir: PathBuf,
         #[arg(short, default_value_t = 10)]
@@ -700,7 +705,7 @@ fn print_run_summary(summary: &pipeline::run::RunSummary, out: &std::path::Path)
         let names: Vec<String> = summary.empty.iter().map(|e| format!("{} (from level {})", e.name, e.first_empty)).collect();
         println!("  empty variants   {} of {}: {}", summary.empty.len(), summary.variants, names.join(", "));
     }
-    println!("  USD asset        {}", out.join(pipeline::layout::ASSET_USD).display());
+    println!("  USD asset        {}", summary.usd_asset.display());
     println!("  metrics          {}", paths.eval_json().display());
     println!("  contact sheet    {}", paths.contact_sheet().display());
     println!("  report           {}", paths.report().display());
@@ -825,7 +830,7 @@ fn run_stage(stage: StageCmd, no_bars: bool, wait: bool) -> Result<()> {
         }
         StageCmd::Usd { dir, n } => {
             let config = recorded(&dir)?;
-            let usd = pipeline::run_usd(&pipeline::RunPaths::new(&dir), Some(n), config.output.meters_per_unit)?;
+            let usd = pipeline::run_usd(&pipeline::RunPaths::new(&dir), Some(n), config.output.meters_per_unit, config.output.usd_format)?;
             println!("{} ({} variant layers)", usd.asset.display(), usd.variants.len());
         }
         StageCmd::Eval { dir, n } => match pipeline::run_eval(&pipeline::RunPaths::new(&dir), n)? {
@@ -1041,7 +1046,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             pipeline::cluster::submit(&meshes, &output, &config, &opts, dry_run, |line| print!("{line}"))?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Usd { dir, meters_per_unit, json } => {
+        Command::Usd { dir, meters_per_unit, format, json } => {
             let paths = pipeline::RunPaths::new(&dir);
             if !dir.is_dir() {
                 anyhow::bail!("{}: no such run folder", dir.display());
@@ -1053,7 +1058,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             if !(mpu.is_finite() && mpu > 0.0) {
                 return Err(shapeshifter::Error::Usage(format!("--meters-per-unit {mpu}: expected a positive number")).into());
             }
-            let outcome = pipeline::run_usd(&paths, None, mpu)?;
+            let outcome = pipeline::run_usd(&paths, None, mpu, format.unwrap_or(config.output.usd_format))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&outcome)?);
             } else {

@@ -241,6 +241,7 @@ fn mesh_stage_writes_light_ply_and_glb_as_configured() {
 
 #[test]
 fn a_light_mesh_is_baked_into_a_texture_and_its_usd_layer_counts_as_its_files() {
+    use shapeshifter::io::usd::UsdFormat;
     use shapeshifter::io::vdb::{write_level, Provenance, WriteOptions};
     let dir = tempfile::tempdir().unwrap();
     let variant = dir.path().join("variants/variant_000");
@@ -283,7 +284,7 @@ fn a_light_mesh_is_baked_into_a_texture_and_its_usd_layer_counts_as_its_files() 
 
     // The USD step: a variant layer whose counts are the OBJ's, and the asset.
     std::fs::write(variant.join("stage_sample.json"), r#"{"digest":"d","seconds":0.0}"#).unwrap();
-    let outcome = shapeshifter::pipeline::usd::usd_stage(dir.path(), &dirs, "sphere", 1.0).unwrap();
+    let outcome = shapeshifter::pipeline::usd::usd_stage(dir.path(), &dirs, "sphere", 1.0, UsdFormat::Usda).unwrap();
     assert_eq!(outcome.variants.len(), 1);
     let v = &outcome.variants[0];
     assert!(v.textured);
@@ -297,6 +298,17 @@ fn a_light_mesh_is_baked_into_a_texture_and_its_usd_layer_counts_as_its_files() 
     let asset = std::fs::read_to_string(dir.path().join("variants.usda")).unwrap();
     assert!(asset.contains("prepend references = @./variants/variant_000/variant.usda@"));
     assert!(asset.contains("defaultPrim = \"sphere\""));
+
+    // Binary layers instead: written (not reused from the text's stamp), the
+    // text ones removed, so the folder holds one asset (what they hold, and
+    // that usd-core reads it as the text: `make interop`).
+    let binary = shapeshifter::pipeline::usd::usd_stage(dir.path(), &dirs, "sphere", 1.0, UsdFormat::Usdc).unwrap();
+    assert_eq!(binary.variants[0].triangles, obj.triangles.len(), "written, not reused");
+    assert_eq!(binary.asset, dir.path().join("variants.usdc"));
+    for f in [variant.join("variant.usdc"), dir.path().join("variants.usdc")] {
+        assert_eq!(&std::fs::read(&f).unwrap()[..8], b"PXR-USDC", "{}", f.display());
+    }
+    assert!(!variant.join("variant.usda").exists() && !dir.path().join("variants.usda").exists());
 
     // Texture off: meshed again, no baked file left from before.
     let plain = MeshConfig { faces: 600, glb: false, texture: 0 };

@@ -23,6 +23,7 @@ use serde::Serialize;
 use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::level::files::LevelFile;
+use crate::io::usd::UsdFormat;
 
 /// The resolved configuration a run (or `sample`, or `train`'s models folder) records.
 pub const CONFIG: &str = "config.toml";
@@ -51,10 +52,15 @@ pub const MESH_MTL: &str = "mesh.mtl";
 /// The baked base-colour texture (named by [`crate::io::obj::texture_path`]).
 pub const MESH_TEXTURE: &str = "mesh_basecolor.png";
 pub const MESH_PREVIEW: &str = "mesh.png";
-/// A variant's own USD layer.
-pub const VARIANT_USD: &str = "variant.usda";
-/// The run's USD asset, one variant set over the variant layers.
-pub const ASSET_USD: &str = "variants.usda";
+/// A variant's own USD layer (`variant.usda` or `variant.usdc`).
+pub fn variant_usd(format: UsdFormat) -> String {
+    format!("variant.{}", format.extension())
+}
+/// The run's USD asset, one variant set over the variant layers
+/// (`variants.usda` or `variants.usdc`).
+pub fn asset_usd(format: UsdFormat) -> String {
+    format!("variants.{}", format.extension())
+}
 
 /// What a file is, for scripts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]

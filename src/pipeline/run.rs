@@ -44,6 +44,8 @@ pub struct RunSummary {
     pub evaluation: Option<Evaluation>,
     /// Variants that pruned to nothing (left out of meshing and scoring).
     pub empty: Vec<super::EmptyVariant>,
+    /// The USD asset (`variants.usda` or `.usdc`).
+    pub usd_asset: std::path::PathBuf,
 }
 
 /// Levels trained at once: `jobs`, or with 0 the cores divided by the libtorch
@@ -251,7 +253,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     let t = Instant::now();
     let usd = {
         let _p = span(0.97, 0.98);
-        super::run_usd(&paths, Some(o.n), config.output.meters_per_unit)?
+        super::run_usd(&paths, Some(o.n), config.output.meters_per_unit, config.output.usd_format)?
     };
     log::info!("usd: {} ({} variant layers)", usd.asset.display(), usd.variants.len());
     stage("usd", t);
@@ -262,7 +264,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
         super::run_eval(&paths, o.n)?
     };
     stage("evaluate", t);
-    Ok(RunSummary { source_name, variants: dirs.len(), seconds, total_seconds: t0.elapsed().as_secs_f64(), evaluation, empty })
+    Ok(RunSummary { source_name, variants: dirs.len(), seconds, total_seconds: t0.elapsed().as_secs_f64(), evaluation, empty, usd_asset: usd.asset })
 }
 
 /// One stage's wall time in a [`RunRecord`].

@@ -1,7 +1,8 @@
 //! The USD step: each variant folder's `variant.usda` (its mesh, its finest
 //! level's points, its level files as volumes) and the run's
 //! `variants.usda`, an asset with one variant set over them
-//! ([`crate::io::usd`] writes the text). Read from the files the other
+//! ([`crate::io::usd`] describes and encodes them; `.usdc` instead with
+//! `output.usd_format = "usdc"`). Read from the files the other
 //! stages wrote, so `run`, `stage mesh` and the `usd` command for an
 //! existing run folder take this one path.
 
@@ -10,12 +11,12 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 
 use crate::error::{Error, Result};
-use crate::io::usd::{self, LevelVolume, MeshPrim, PointsPrim, StageMetadata, VariantLayer};
+use crate::io::usd::{self, LevelVolume, MeshPrim, PointsPrim, StageMetadata, UsdFormat, VariantLayer};
 use crate::io::{mesh, vdb};
 
 use super::stamp::StampOf;
 use super::RunPaths;
-use super::layout::{variant_dir, ASSET_USD, MESH_OBJ, MESH_PLY, MESH_TEXTURE, VARIANT_USD};
+use super::layout::{asset_usd, variant_dir, variant_usd, MESH_OBJ, MESH_PLY, MESH_TEXTURE};
 
 /// What a variant's USD layer depends on (its stamp's digest): the variant's
 /// sample stamp, its mesh stamp with the mesh's time, the units, the name.
@@ -25,6 +26,24 @@ struct UsdInputs<'a> {
     meshed: &'a str,
     meters_per_unit: f64,
     exemplar: &'a str,
+    /// Absent (text) in the digests written before binary layers.
+    #[serde(skip_serializing_if = "is_text")]
+    format: UsdFormat,
+}
+
+fn is_text(f: &UsdFormat) -> bool {
+    *f == UsdFormat::Usda
+}
+
+/// Removes the layer of the other encoding `name` (e.g. `variant.usdc`
+/// when writing `variant.usda`): a run folder holds one asset, whose layers
+/// are those it references.
+fn remove_other_encoding(dir: &Path, format: UsdFormat, name: impl Fn(UsdFormat) -> String) {
+    for other in [UsdFormat::Usda, UsdFormat::Usdc] {
+        if other != format {
+            let _ = std::fs::remove_file(dir.join(name(other)));
+        }
+    }
 }
 
 /// What the variant layer holds, for the log and `--json` (counts 0 where
@@ -44,13 +63,13 @@ pub fn metadata(up: crate::level::Up, meters_per_unit: f64, exemplar: &str) -> S
     StageMetadata { up, meters_per_unit, doc: format!("{}: variants of {exemplar}", vdb::CREATOR) }
 }
 
-/// Writes `dir/variant.usda` from the folder's files: the textured
+/// Writes `dir/variant.usda` (or `.usdc`) from the folder's files: the textured
 /// `mesh.obj` where there is one, else `mesh.ply`, else no mesh; the finest
 /// level's points; every `level_K.vdb` as a choice of the volume's `level`
 /// set. None (and no layer) for a variant whose finest level has no surface
 /// voxels (pruned to nothing). Errors: no level files, a file that does not
 /// read, the layer not written.
-pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result<Option<VariantUsd>> {
+pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str, format: UsdFormat) -> Result<Option<VariantUsd>> {
     let files = crate::eval::evaluate::level_files(dir)?;
     let mut levels = Vec::with_capacity(files.len());
     let mut finest = None;
@@ -65,7 +84,7 @@ pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result
     }
     let (finest, mut points) = finest.expect("level_files returns at least one");
     if points.is_empty() {
-        let _ = std::fs::remove_file(dir.join(VARIANT_USD));
+        let _ = std::fs::remove_file(dir.join(variant_usd(format)));
         return Ok(None);
     }
     points.normals.iter_mut().for_each(|n| *n = n.normalize_or_zero());
@@ -98,9 +117,10 @@ pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result
         }),
         levels,
     };
-    let text = usd::variant_layer(&layer, &metadata(finest.frame.up, meters_per_unit, exemplar));
-    let path = dir.join(VARIANT_USD);
-    crate::util::fs::write_file(&path, text)?;
+    let bytes = format.encode(&usd::variant_layer(&layer, &metadata(finest.frame.up, meters_per_unit, exemplar)));
+    let path = dir.join(variant_usd(format));
+    crate::util::fs::write_file(&path, bytes)?;
+    remove_other_encoding(dir, format, variant_usd);
     Ok(Some(VariantUsd {
         path,
         triangles: m.as_ref().map_or(0, |m| m.triangles.len()),
@@ -110,25 +130,27 @@ pub fn write_variant(dir: &Path, meters_per_unit: f64, exemplar: &str) -> Result
     }))
 }
 
-/// Writes `root/variants.usda` over the variant folders in `dirs` that hold
-/// a `variant.usda`; the first is the default selection. The asset prim is
-/// named after the exemplar.
-pub fn write_asset(root: &Path, dirs: &[PathBuf], exemplar: &str, up: crate::level::Up, meters_per_unit: f64) -> Result<PathBuf> {
+/// Writes `root/variants.usda` (or `.usdc`) over the variant folders in
+/// `dirs` that hold a layer of that encoding; the first is the default
+/// selection. The asset prim is named after the exemplar.
+pub fn write_asset(root: &Path, dirs: &[PathBuf], exemplar: &str, up: crate::level::Up, meters_per_unit: f64, format: UsdFormat) -> Result<PathBuf> {
+    let layer_name = variant_usd(format);
     let variants: Vec<(String, String)> = dirs
         .iter()
-        .filter(|d| d.join(VARIANT_USD).is_file())
+        .filter(|d| d.join(&layer_name).is_file())
         .filter_map(|d| {
             let rel = d.strip_prefix(root).ok()?;
             let name = d.file_name()?.to_string_lossy().into_owned();
-            Some((name, format!("./{}/{VARIANT_USD}", rel.to_string_lossy())))
+            Some((name, format!("./{}/{layer_name}", rel.to_string_lossy())))
         })
         .collect();
     let Some((default, _)) = variants.first() else {
-        return Err(Error::file(root, "no variant folder holds a variant.usda: nothing for the USD asset to select"));
+        return Err(Error::file(root, format!("no variant folder holds a {layer_name}: nothing for the USD asset to select")));
     };
-    let text = usd::asset_layer(exemplar, &variants, &usd::identifier(default), &metadata(up, meters_per_unit, exemplar));
-    let path = root.join(ASSET_USD);
-    crate::util::fs::write_file(&path, text)?;
+    let layer = usd::asset_layer(exemplar, &variants, &usd::identifier(default), &metadata(up, meters_per_unit, exemplar));
+    let path = root.join(asset_usd(format));
+    crate::util::fs::write_file(&path, format.encode(&layer))?;
+    remove_other_encoding(root, format, asset_usd);
     Ok(path)
 }
 
@@ -142,7 +164,7 @@ pub struct UsdOutcome {
 /// The USD step over the finished variant folders in `dirs`: each one's
 /// `variant.usda` (reused when its levels, its mesh and `meters_per_unit`
 /// are those it was written from), then `root/variants.usda`.
-pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit: f64) -> Result<UsdOutcome> {
+pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit: f64, format: UsdFormat) -> Result<UsdOutcome> {
     let mut variants = Vec::new();
     // The up axis every level of a run shares: from a coarsest level (small).
     let up = dirs
@@ -166,15 +188,15 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
             (Some(s), Ok(t)) => format!("{} {:?}", s.digest, t),
             _ => String::new(),
         };
-        let d = super::stamp::digest_of(&UsdInputs { sampled: &sampled.digest, meshed: &meshed, meters_per_unit, exemplar });
-        if super::stamp::is_done(dir, StampOf::Usd, &d) && dir.join(VARIANT_USD).is_file() {
+        let d = super::stamp::digest_of(&UsdInputs { sampled: &sampled.digest, meshed: &meshed, meters_per_unit, exemplar, format });
+        if super::stamp::is_done(dir, StampOf::Usd, &d) && dir.join(variant_usd(format)).is_file() {
             // Reused: its summary is what the layer holds (read cheaply from the stamp's files).
-            variants.push(VariantUsd { path: dir.join(VARIANT_USD), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 });
+            variants.push(VariantUsd { path: dir.join(variant_usd(format)), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 });
             continue;
         }
         // A variant pruned to nothing has no layer (a warning); any other
         // failure (a full disk, an unreadable file) is the step's error.
-        match write_variant(dir, meters_per_unit, exemplar)? {
+        match write_variant(dir, meters_per_unit, exemplar, format)? {
             Some(v) => {
                 super::stamp::mark_done(dir, StampOf::Usd, &d, t.elapsed().as_secs_f64())?;
                 variants.push(v);
@@ -182,14 +204,14 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
             None => log::warn!("{}: pruned to nothing: not in the USD asset", dir.display()),
         }
     }
-    let asset = write_asset(root, dirs, exemplar, up, meters_per_unit)?;
+    let asset = write_asset(root, dirs, exemplar, up, meters_per_unit, format)?;
     Ok(UsdOutcome { asset, variants })
 }
 
 /// The USD step ([`usd::usd_stage`]) over variants `0..n`, or every variant
 /// folder there is (None: the `usd` command on an existing run folder):
 /// each sampled variant's `variant.usda`, then `OUT/variants.usda`.
-pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Result<UsdOutcome> {
+pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64, format: UsdFormat) -> Result<UsdOutcome> {
     let manifest = crate::io::dataset::read_manifest(&paths.exemplar())?;
     let dirs: Vec<PathBuf> = match n {
         Some(n) => (0..n).map(|i| variant_dir(&paths.variants(), i)).filter(|d| d.is_dir()).collect(),
@@ -204,6 +226,6 @@ pub fn run_usd(paths: &RunPaths, n: Option<usize>, meters_per_unit: f64) -> Resu
             dirs
         }
     };
-    usd_stage(&paths.root, &dirs, &manifest.exemplar, meters_per_unit)
+    usd_stage(&paths.root, &dirs, &manifest.exemplar, meters_per_unit, format)
 }
 
