@@ -10,7 +10,8 @@
 #   write (.ply and .glb, vertex colours present);
 # - Pixar's usd-core (PyPI, its own virtual environment): opens the run's
 #   variants.usda, selects every variant, checks prim types, counts against
-#   the mesh and level files, asset paths, UsdUtils.ComplianceChecker;
+#   the mesh and level files, asset paths, its validators; the same for the
+#   binary layers (`usd --format usdc`), and that they hold the text's scene;
 #   Blender 4.2 (PyPI's bpy module: Debian's Blender has no USD) imports it
 #   with its USD importer (scripts/interop/usd_check.py, blender_usd.py);
 # - Chromium (headless): opens report.html, every image decodes; a screenshot;
@@ -111,6 +112,12 @@ for v in sorted(os.listdir(os.path.join(run, "variants"))):
 print(json.dumps(counts))
 PY
 "$USD_VENV/bin/python" "$ROOT/scripts/interop/usd_check.py" "$WORK/run" "$WORK/usd_counts.json"
+# The same run's layers written binary (`usd --format usdc`, in a copy of the
+# run): the same checks on variants.usdc, then the same scene as the text.
+cp -r "$WORK/run" "$WORK/run_usdc"
+"$BIN" -q usd "$WORK/run_usdc" --format usdc > /dev/null
+"$USD_VENV/bin/python" "$ROOT/scripts/interop/usd_check.py" "$WORK/run_usdc" "$WORK/usd_counts.json" usdc
+"$USD_VENV/bin/python" "$ROOT/scripts/interop/usd_binary_check.py" "$WORK/run" "$WORK/run_usdc"
 # Blender imports the asset (the default variant) with its own USD importer.
 DEFAULT_DIR="$WORK/run/variants/variant_000"
 if [ -f "$DEFAULT_DIR/mesh_basecolor.png" ]; then TRIANGLES=$(grep -c '^f ' "$DEFAULT_DIR/mesh.obj");

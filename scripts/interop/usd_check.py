@@ -1,6 +1,6 @@
 """Pixar's usd-core opens a run's USD asset (`make interop`).
 
-usage: usd_check.py RUN_DIR
+usage: usd_check.py RUN_DIR [COUNTS_JSON [EXT]]   (EXT: usda, the default, or usdc)
 
 Checks, printing one `interop:` line per finding and exiting 1 on the first
 failure:
@@ -60,7 +60,8 @@ def obj_counts(path):
 def main():
     run = sys.argv[1]
     counts = json.load(open(sys.argv[2])) if len(sys.argv) > 2 else {}
-    asset = os.path.join(run, "variants.usda")
+    ext = sys.argv[3] if len(sys.argv) > 3 else "usda"
+    asset = os.path.join(run, f"variants.{ext}")
     stage = Usd.Stage.Open(asset)
     if not stage:
         fail(f"{asset} does not open")
@@ -75,7 +76,7 @@ def main():
     vset = root.GetVariantSets().GetVariantSet("variant")
     names = vset.GetVariantNames()
     folders = sorted(d for d in os.listdir(os.path.join(run, "variants"))
-                     if os.path.isfile(os.path.join(run, "variants", d, "variant.usda")))
+                     if os.path.isfile(os.path.join(run, "variants", d, f"variant.{ext}")))
     if sorted(names) != folders:
         fail(f"variants {names} but folders {folders}")
     if not vset.GetVariantSelection():
@@ -170,12 +171,12 @@ def main():
     warned = []
     for name in names:
         vset.SetVariantSelection(name)
-        warned += validate(stage, f"variants.usda ({name})")
+        warned += validate(stage, f"variants.{ext} ({name})")
     vset.ClearVariantSelection()
-    layer_path = os.path.join(run, "variants", folders[0], "variant.usda")
+    layer_path = os.path.join(run, "variants", folders[0], f"variant.{ext}")
     warned += validate(Usd.Stage.Open(layer_path), os.path.relpath(layer_path, run))
     distinct = sorted({f"{e.GetName()}: {e.GetMessage()}" for e in warned})
-    print(f"interop: usd-core's {len(validators)} validators (UsdValidation, as usdchecker): variants.usda with each "
+    print(f"interop: usd-core's {len(validators)} validators (UsdValidation, as usdchecker): variants.{ext} with each "
           f"variant selected and {os.path.relpath(layer_path, run)}: no errors"
           + (f", warnings: {distinct}" if distinct else ", no warnings"))
 
