@@ -789,6 +789,21 @@ mod tests {
         assert!(err.contains("paper"), "{err}");
     }
 
+    /// `output.usd_format`: text unless set (and then not recorded), binary
+    /// on request, anything else refused with the accepted values.
+    #[test]
+    fn the_usd_format_is_text_unless_set() {
+        use crate::io::usd::UsdFormat;
+        let a = Config::load("cpu", &[]).unwrap();
+        assert_eq!(a.output.usd_format, UsdFormat::Usda);
+        assert!(!a.to_toml().contains("usd_format"));
+        let b = Config::load("cpu", &["output.usd_format=usdc".into()]).unwrap();
+        assert_eq!(b.output.usd_format, UsdFormat::Usdc);
+        assert!(b.to_toml().contains("usd_format = \"usdc\""));
+        let err = Config::load("cpu", &["output.usd_format=usdz".into()]).unwrap_err().to_string();
+        assert!(err.contains("usdz") && err.contains("usdc"), "{err}");
+    }
+
     /// The exemplar-file keys are left out at their defaults (old run folders'
     /// digests hold), and `--set` can still give them.
     #[test]
