@@ -354,6 +354,8 @@ mod tests {
         assert!(text.contains("string level = \"level_1\""));
         assert!(text.contains("asset filePath = @@@./a@b/level_1.vdb@@@"));
         assert!(text.contains("rel material:binding = </variant/Looks/baked>"));
+        // usd-core refuses a bare value here (references take one).
+        assert!(text.contains("prepend apiSchemas = [\"MaterialBindingAPI\"]"));
         assert!(text.contains("interpolation = \"faceVarying\""));
         assert_eq!(text.matches("def OpenVDBAsset").count(), 2 * LEVEL_FIELDS.len());
         // Balanced braces: every prim and variant closed.

@@ -53,7 +53,10 @@ fn write_metadata(s: &mut String, body: &Body, depth: usize) {
         lines.push(format!("kind = {}", quoted(kind)));
     }
     if !api_schemas.is_empty() {
-        lines.push(format!("prepend apiSchemas = {}", list(api_schemas.iter().map(|a| quoted(a)))));
+        // apiSchemas takes no bare value in USD's grammar (references and
+        // variantSets do): always a list.
+        let names: Vec<String> = api_schemas.iter().map(|a| quoted(a)).collect();
+        lines.push(format!("prepend apiSchemas = [{}]", names.join(", ")));
     }
     if !references.is_empty() {
         lines.push(format!("prepend references = {}", list(references.iter().map(|r| asset(r)))));
@@ -82,7 +85,7 @@ fn write_metadata(s: &mut String, body: &Body, depth: usize) {
     s.push(')');
 }
 
-/// `"a"` for one item, `["a", "b"]` for more.
+/// `"a"` for one item, `["a", "b"]` for more (where the field allows a bare value).
 fn list(items: impl Iterator<Item = String>) -> String {
     let items: Vec<String> = items.collect();
     if items.len() == 1 {
