@@ -319,6 +319,19 @@ struct OneVariant<'a> {
     structure_reference: Option<(&'a Level, &'a Structure)>,
 }
 
+/// The structural thresholds sampling compares with the exemplar. With a
+/// resized level-0 box (`extent` other than 1, 1, 1) the variant is meant to
+/// differ from the exemplar in size, so the size terms (fragment, shrunken)
+/// are off; pieces, tears, openings and the inside seen still count.
+fn structure_params(opts: &SampleOptions) -> StructureParams {
+    let mut params = StructureParams::default();
+    if opts.extent != [1.0; 3] {
+        params.min_extent_ratio = 0.0;
+        params.min_mass_ratio = 0.0;
+    }
+    params
+}
+
 /// The seed of attempt `a` of a variant (attempt 0 is the variant's own seed).
 fn attempt_seed(seed: u64, a: usize) -> u64 {
     if a == 0 {
@@ -365,7 +378,7 @@ impl OneVariant<'_> {
     /// best scoring.
     fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<(SparseTensor, Level)> {
         let (ex_level, ex_structure) = self.exemplar0;
-        let params = StructureParams::default();
+        let params = structure_params(opts);
         let novel = opts.level0_pick == crate::config::Level0Pick::Novel;
         let candidates = opts.level0_candidates.max(1);
         // (score, x, level) of the best scoring; (likeness, k, x, level) of
@@ -378,12 +391,17 @@ impl OneVariant<'_> {
             if candidates == 1 {
                 return Ok((x, level));
             }
-            let score = if level.is_empty() {
-                0.0
+            // A candidate cut short along an axis does not pass whatever its
+            // score: at 16^3 a bunny without its ear tips (13 of 16 voxels,
+            // score 0.81) is "new" to the F-score below, and the finer
+            // levels shred the stubs (docs/results.md, "New shapes").
+            let (score, shrunken) = if level.is_empty() {
+                (0.0, true)
             } else {
-                StructureScores::new(&level, &Structure::of(&level), ex_level, ex_structure, &params).score
+                let s = StructureScores::new(&level, &Structure::of(&level), ex_level, ex_structure, &params);
+                (s.score, s.flags.contains(&crate::level::structure::Flag::Shrunken))
             };
-            let pass = score >= opts.level0_min_structure;
+            let pass = score >= opts.level0_min_structure && !shrunken;
             if pass && novel {
                 let m = crate::level::structure::Matching::of(&level, ex_level);
                 // Lower is less like the exemplar.
@@ -427,17 +445,37 @@ impl OneVariant<'_> {
     /// `attempts` > 1 (and no level to continue from), passes from new
     /// level-0 noise (attempt seeds) until one is whole at the structure
     /// level ([`StructureScores`] flags); else the best (whole first, then
-    /// not a near copy, then by score).
+    /// not a near copy, then by score). Attempts stop at the structure
+    /// level; only the kept one goes on to the finer levels (continuing
+    /// from a level reproduces the pass that made it, so the variant is the
+    /// same as if every attempt had gone to the end).
     fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
         let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
         let Some((ex_level, ex_structure)) = reference.filter(|_| attempts > 1) else {
-            return self.pass(self.seed, resolution0, opts, from);
+            return self.pass(self.seed, resolution0, opts, from, self.last);
         };
-        let params = StructureParams::default();
-        let mut best: Option<((u8, u8, f64), Vec<Level>)> = None;
+        let (mut levels, cur) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
+        let next = levels.len();
+        self.descend(cur, next, self.last, opts, &mut levels)?;
+        Ok(levels)
+    }
+
+    /// The levels, up to the structure level, of the first of `attempts`
+    /// passes that is whole there, else of the best.
+    /// The pruned tensor of the last of them comes along, for the finer levels.
+    fn kept_attempt(
+        &self,
+        resolution0: u32,
+        opts: &SampleOptions,
+        ex_level: &Level,
+        ex_structure: &Structure,
+        attempts: usize,
+    ) -> Result<(Vec<Level>, SparseTensor)> {
+        let params = structure_params(opts);
+        let mut best: Option<((u8, u8, f64), (Vec<Level>, SparseTensor))> = None;
         for a in 0..attempts {
-            let levels = self.pass(attempt_seed(self.seed, a), resolution0, opts, None)?;
+            let (levels, cur) = self.start(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
             let level = &levels[ex_level.index];
             let rank = if level.is_empty() {
                 (0, 0, 0.0)
@@ -456,10 +494,10 @@ impl OneVariant<'_> {
                 if a > 0 {
                     log::info!("variant kept at attempt {a} (structure {:.3} at {}^3)", rank.2, ex_level.resolution);
                 }
-                return Ok(levels);
+                return Ok((levels, cur));
             }
             if better {
-                best = Some((rank, levels));
+                best = Some((rank, (levels, cur)));
             }
         }
         let (rank, levels) = best.expect("at least one attempt");
@@ -475,28 +513,47 @@ impl OneVariant<'_> {
     /// from the variant's own seed (so continuing from an unedited level
     /// reproduces the finer levels of the pass that made it, whichever
     /// attempt that was).
-    fn pass(&self, level0_seed: u64, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
-        let seed = self.seed;
-        let dev = self.models.device;
+    fn pass(&self, level0_seed: u64, resolution0: u32, opts: &SampleOptions, from: Option<&Level>, last: usize) -> Result<Vec<Level>> {
+        Ok(self.start(level0_seed, resolution0, opts, from, last)?.0)
+    }
+
+    /// [`Self::pass`] up to level `last` (at most the variant's last), with
+    /// the last level's pruned tensor.
+    fn start(
+        &self,
+        level0_seed: u64,
+        resolution0: u32,
+        opts: &SampleOptions,
+        from: Option<&Level>,
+        last: usize,
+    ) -> Result<(Vec<Level>, SparseTensor)> {
         let mut out = Vec::new();
-        let (mut cur, first) = match from {
+        let (cur, first) = match from {
             None => {
                 let (pruned, level) = self.chosen_level0(level0_seed, resolution0, opts)?;
                 out.push(level);
                 (pruned, 1)
             }
             Some(level) => {
-                let one = SparseTensor::from_level(level, dev)?.prune_by_mask()?;
+                let one = SparseTensor::from_level(level, self.models.device)?.prune_by_mask()?;
                 (one, level.index + 1)
             }
         };
-        for l in first..=self.last {
+        let cur = self.descend(cur, first, last, opts, &mut out)?;
+        Ok((out, cur))
+    }
+
+    /// Levels `first..=last` (at most the variant's last) from the pruned
+    /// level below them, `cur`, appended to `out`; the last one's pruned
+    /// tensor.
+    fn descend(&self, mut cur: SparseTensor, first: usize, last: usize, opts: &SampleOptions, out: &mut Vec<Level>) -> Result<SparseTensor> {
+        let (seed, dev) = (self.seed, self.models.device);
+        for l in first..=last.min(self.last) {
             if cur.is_empty() {
                 let empty = SparseTensor::new(
                     Arc::new(SparseGrid::empty(cur.grid.resolution() * 2)),
                     Tensor::zeros([0, FEATURE_CHANNELS as i64], (Kind::Float, dev)),
-                )
-                ?;
+                )?;
                 out.push(empty.to_level(l, self.frame)?);
                 cur = empty;
                 continue;
@@ -511,7 +568,7 @@ impl OneVariant<'_> {
             cur = x.prune_by_mask()?;
             out.push(cur.to_level(l, self.frame)?);
         }
-        Ok(out)
+        Ok(cur)
     }
 
     /// The reverse process of level `l` from `t_max` to 0 in `steps` steps,
@@ -542,3 +599,20 @@ impl OneVariant<'_> {
     }
 }
 
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_resized_box_turns_the_size_flags_off_and_nothing_else() {
+        let config = Config::load("demo", &[]).expect("demo profile");
+        let mut opts = SampleOptions::from_config(&config, 1, 0);
+        assert_eq!(structure_params(&opts), StructureParams::default());
+        opts.extent = [2.0, 1.0, 1.0];
+        let p = structure_params(&opts);
+        assert_eq!((p.min_extent_ratio, p.min_mass_ratio), (0.0, 0.0));
+        let d = StructureParams::default();
+        assert_eq!((p.free_boundary_ratio, p.min_enclosure_ratio, p.max_seen_through_excess), (d.free_boundary_ratio, d.min_enclosure_ratio, d.max_seen_through_excess));
+    }
+}
