@@ -391,17 +391,18 @@ impl OneVariant<'_> {
             if candidates == 1 {
                 return Ok((x, level));
             }
-            // A candidate cut short along an axis does not pass whatever its
-            // score: at 16^3 a bunny without its ear tips (13 of 16 voxels,
-            // score 0.81) is "new" to the F-score below, and the finer
-            // levels shred the stubs (docs/results.md, "New shapes").
+            // With the gate on (a minimum above 0), a candidate cut short
+            // along an axis does not pass whatever its score: at 16^3 a
+            // bunny without its ear tips (13 of 16 voxels, score 0.81) is
+            // "new" to the F-score below, and the finer levels shred the
+            // stubs (docs/results.md, "New shapes").
             let (score, shrunken) = if level.is_empty() {
                 (0.0, true)
             } else {
                 let s = StructureScores::new(&level, &Structure::of(&level), ex_level, ex_structure, &params);
                 (s.score, s.flags.contains(&crate::level::structure::Flag::Shrunken))
             };
-            let pass = score >= opts.level0_min_structure && !shrunken;
+            let pass = score >= opts.level0_min_structure && (opts.level0_min_structure <= 0.0 || !shrunken);
             if pass && novel {
                 let m = crate::level::structure::Matching::of(&level, ex_level);
                 // Lower is less like the exemplar.
