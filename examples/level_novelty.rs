@@ -5,6 +5,8 @@
 //! becomes (or stays) a copy.
 //!
 //! `cargo run --release --example level_novelty -- EXEMPLAR_DIR VARIANT_DIR...`
+//! (`NOVELTY_PR=1`: also the precision, what of the variant the exemplar
+//! has, and the recall, what of the exemplar the variant has)
 
 use shapeshifter::level::structure::Matching;
 use std::path::Path;
@@ -23,7 +25,11 @@ fn main() -> anyhow::Result<()> {
             .map(|&l| {
                 let v = read(d, l)?;
                 let m = Matching::of(&v, &exemplar[l]);
-                Ok(format!("{:.3}/{:.3}", m.fscore(), m.largest_change()))
+                Ok(if std::env::var_os("NOVELTY_PR").is_some() {
+                    format!("{:.3}/{:.3} p{:.3} r{:.3}", m.fscore(), m.largest_change(), m.precision(), m.recall())
+                } else {
+                    format!("{:.3}/{:.3}", m.fscore(), m.largest_change())
+                })
             })
             .collect::<anyhow::Result<_>>()?;
         println!("{d}  {}", cells.join("  "));

@@ -490,14 +490,27 @@ impl Matching {
         components(&changed).first().map_or(0.0, |&c| c as f64 / m.b_voxels as f64)
     }
 
-    /// [`tolerant_fscore`] of the two.
-    pub fn fscore(&self) -> f64 {
-        let m = self;
-        if m.a_voxels == 0 || m.b_voxels == 0 {
+    /// Share of `a`'s voxels with one of `b` within 1 voxel (0 when either
+    /// is empty): below 1 where `a` has something `b` does not.
+    pub fn precision(&self) -> f64 {
+        if self.a_voxels == 0 || self.b_voxels == 0 {
             return 0.0;
         }
-        let precision = 1.0 - m.a_unmatched.len() as f64 / m.a_voxels as f64;
-        let recall = 1.0 - m.b_unmatched.len() as f64 / m.b_voxels as f64;
+        1.0 - self.a_unmatched.len() as f64 / self.a_voxels as f64
+    }
+
+    /// Share of `b`'s voxels with one of `a` within 1 voxel (0 when either
+    /// is empty): below 1 where `a` lacks something of `b`.
+    pub fn recall(&self) -> f64 {
+        if self.a_voxels == 0 || self.b_voxels == 0 {
+            return 0.0;
+        }
+        1.0 - self.b_unmatched.len() as f64 / self.b_voxels as f64
+    }
+
+    /// [`tolerant_fscore`] of the two.
+    pub fn fscore(&self) -> f64 {
+        let (precision, recall) = (self.precision(), self.recall());
         if precision + recall == 0.0 {
             0.0
         } else {
