@@ -359,6 +359,99 @@ fn candidate_seed(seed: u64, k: usize) -> u64 {
 /// full reverse process at level 0).
 pub const NEW_ENOUGH_LEVEL0_FSCORE: f64 = 0.985;
 
+/// Why the level-0 pick kept the candidate it kept.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kept {
+    /// `first`: the first that passed.
+    First,
+    /// `novel`: the first that passed with an F-score below
+    /// [`NEW_ENOUGH_LEVEL0_FSCORE`] against the exemplar's level 0.
+    NewEnough { fscore: f64, change: f64 },
+    /// `novel`: none new enough; of those that passed, the least like the
+    /// exemplar (lowest F-score, then the largest changed region).
+    LeastLike { fscore: f64, change: f64 },
+    /// None passed: the best scoring.
+    BestScoring { score: f64 },
+}
+
+/// What an offered candidate means for the pick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Offer {
+    /// Hold it as the fallback: it is the best scoring so far.
+    best: bool,
+    /// Hold it as the pick: the first that passed (`first`), or the least
+    /// like the exemplar of those passing so far (`novel`).
+    picked: bool,
+    /// Draw no more candidates.
+    stop: bool,
+}
+
+/// The level-0 pick as a policy over the candidates' figures, drawn one at a
+/// time: a candidate passes when its structure score reaches the minimum
+/// and, with the gate on (a minimum above 0), it is not cut short along an
+/// axis (`shrunken`: at 16^3 a bunny without its ear tips, 13 of 16 voxels,
+/// scores 0.81 and is "new" to the F-score; the finer levels shred the
+/// stubs; docs/results.md, "New shapes").
+struct Level0Pick {
+    novel: bool,
+    min_structure: f64,
+    /// (score, k) of the best scoring.
+    best: Option<(f64, usize)>,
+    /// ((F-score, -change), k) of the least like the exemplar that passed.
+    newest: Option<((f64, f64), usize)>,
+    /// The `first` pick's candidate, once one passed.
+    first: Option<usize>,
+}
+
+impl Level0Pick {
+    fn new(pick: crate::config::Level0Pick, min_structure: f64) -> Self {
+        Level0Pick { novel: pick == crate::config::Level0Pick::Novel, min_structure, best: None, newest: None, first: None }
+    }
+
+    fn passes(&self, score: f64, shrunken: bool) -> bool {
+        score >= self.min_structure && (self.min_structure <= 0.0 || !shrunken)
+    }
+
+    /// Candidate `k` with its structure score and shrunken flag; `likeness`
+    /// (its F-score and largest changed region against the exemplar's level
+    /// 0) is computed only when the novel pick needs it.
+    fn offer(&mut self, k: usize, score: f64, shrunken: bool, likeness: impl FnOnce() -> (f64, f64)) -> Offer {
+        let pass = self.passes(score, shrunken);
+        let mut offer = Offer { best: false, picked: false, stop: false };
+        if self.best.is_none_or(|(b, _)| score > b) {
+            self.best = Some((score, k));
+            offer.best = true;
+        }
+        if pass && self.novel {
+            let (fscore, change) = likeness();
+            // Lower is less like the exemplar.
+            let key = (fscore, -change);
+            if self.newest.is_none_or(|(n, _)| key < n) {
+                self.newest = Some((key, k));
+                offer.picked = true;
+            }
+            offer.stop = fscore < NEW_ENOUGH_LEVEL0_FSCORE;
+        } else if pass {
+            self.first = Some(k);
+            offer.picked = true;
+            offer.stop = true;
+        }
+        offer
+    }
+
+    /// The candidate kept, and why (None before any offer).
+    fn kept(&self) -> Option<(usize, Kept)> {
+        if let Some(k) = self.first {
+            return Some((k, Kept::First));
+        }
+        if let Some(((fscore, change), k)) = self.newest {
+            let change = -change;
+            return Some((k, if fscore < NEW_ENOUGH_LEVEL0_FSCORE { Kept::NewEnough { fscore, change } } else { Kept::LeastLike { fscore, change } }));
+        }
+        self.best.map(|(score, k)| (k, Kept::BestScoring { score }))
+    }
+}
+
 impl OneVariant<'_> {
     /// Level 0 from the noise of `seed`, pruned.
     fn level0(&self, resolution0: u32, seed: u64, opts: &SampleOptions) -> Result<SparseTensor> {
@@ -369,77 +462,65 @@ impl OneVariant<'_> {
         Ok(self.reverse(0, x, 1.0, opts.level0_steps, seed, opts.final_step, opts.level0_sampler)?.prune_by_mask()?)
     }
 
-    /// Level 0 of this variant: of up to `level0_candidates` shapes, the
-    /// first whose structure score reaches `level0_min_structure` (pick
-    /// `first`), or (pick `novel`) the first that reaches it and is new
-    /// enough ([`NEW_ENOUGH_LEVEL0_FSCORE`]), else of all that reach it the
-    /// least like the exemplar's level 0 (the lowest 1-voxel-tolerant
-    /// F-score, then the largest changed region); when none reaches it, the
+    /// Level 0 of this variant: of up to `level0_candidates` shapes, drawn
+    /// one at a time, the one [`Level0Pick`] keeps: the first that passes
+    /// (its structure score reaches `level0_min_structure` and it is not
+    /// cut short) with pick `first`; with `novel` the first that passes and
+    /// is new enough ([`NEW_ENOUGH_LEVEL0_FSCORE`]), else of all that pass
+    /// the least like the exemplar's level 0 (the lowest 1-voxel-tolerant
+    /// F-score, then the largest changed region); when none passes, the
     /// best scoring.
     fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<(SparseTensor, Level)> {
         let (ex_level, ex_structure) = self.exemplar0;
         let params = structure_params(opts);
-        let novel = opts.level0_pick == crate::config::Level0Pick::Novel;
         let candidates = opts.level0_candidates.max(1);
-        // (score, x, level) of the best scoring; (likeness, k, x, level) of
-        // the least like the exemplar among those passing.
-        let mut best: Option<(f64, SparseTensor, Level)> = None;
-        let mut newest: Option<((f64, f64), usize, SparseTensor, Level)> = None;
+        let mut pick = Level0Pick::new(opts.level0_pick, opts.level0_min_structure);
+        // The candidates the pick may still keep: the best scoring (the
+        // fallback) and its pick so far.
+        let mut best: Option<(SparseTensor, Level)> = None;
+        let mut picked: Option<(SparseTensor, Level)> = None;
         for k in 0..candidates {
             let x = self.level0(resolution0, candidate_seed(seed, k), opts)?;
             let level = x.to_level(0, self.frame)?;
             if candidates == 1 {
                 return Ok((x, level));
             }
-            // With the gate on (a minimum above 0), a candidate cut short
-            // along an axis does not pass whatever its score: at 16^3 a
-            // bunny without its ear tips (13 of 16 voxels, score 0.81) is
-            // "new" to the F-score below, and the finer levels shred the
-            // stubs (docs/results.md, "New shapes").
             let (score, shrunken) = if level.is_empty() {
                 (0.0, true)
             } else {
                 let s = StructureScores::new(&level, &Structure::of(&level), ex_level, ex_structure, &params);
                 (s.score, s.flags.contains(&crate::level::structure::Flag::Shrunken))
             };
-            let pass = score >= opts.level0_min_structure && (opts.level0_min_structure <= 0.0 || !shrunken);
-            if pass && novel {
+            let offer = pick.offer(k, score, shrunken, || {
                 let m = crate::level::structure::Matching::of(&level, ex_level);
-                // Lower is less like the exemplar.
-                let likeness = (m.fscore(), -m.largest_change());
-                log::debug!("level 0 candidate {k}: structure {score:.3}, F {:.3}, change {:.3}", likeness.0, -likeness.1);
-                if newest.as_ref().is_none_or(|n| likeness < n.0) {
-                    newest = Some((likeness, k, x.with_feats(x.feats.shallow_clone())?, level.clone()));
-                }
-                if likeness.0 < NEW_ENOUGH_LEVEL0_FSCORE {
-                    break;
-                }
-            } else {
-                log::debug!("level 0 candidate {k}: structure {score:.3}");
+                (m.fscore(), m.largest_change())
+            });
+            log::debug!("level 0 candidate {k}: structure {score:.3}{}", if shrunken { ", shrunken" } else { "" });
+            if offer.picked {
+                picked = Some((x.with_feats(x.feats.shallow_clone())?, level.clone()));
             }
-            if best.as_ref().is_none_or(|b| score > b.0) {
-                best = Some((score, x, level));
+            if offer.best {
+                best = Some((x, level));
             }
-            if pass && !novel {
-                if k > 0 {
-                    log::info!("level 0: candidate {k} kept (structure {score:.3}), {k} rejected");
-                }
+            if offer.stop {
                 break;
             }
         }
-        if let Some(((f, change), k, x, level)) = newest {
-            let why = if f < NEW_ENOUGH_LEVEL0_FSCORE { "new enough" } else { "the least like the exemplar of all" };
-            log::info!("level 0: candidate {k} of {candidates} kept, {why} (F {f:.3}, change {:.3} against the exemplar's level 0)", -change);
-            return Ok((x, level));
-        }
-        let (score, x, level) = best.expect("at least one candidate");
-        if score < opts.level0_min_structure {
-            log::warn!(
-                "level 0: none of {candidates} candidates reached structure {:.2}: the best ({score:.3}) is kept",
+        let (k, why) = pick.kept().expect("at least one candidate");
+        match why {
+            Kept::First if k > 0 => log::info!("level 0: candidate {k} kept, {k} rejected"),
+            Kept::First => {}
+            Kept::NewEnough { fscore, change } | Kept::LeastLike { fscore, change } => {
+                let how = if matches!(why, Kept::NewEnough { .. }) { "new enough" } else { "the least like the exemplar of all" };
+                log::info!("level 0: candidate {k} of {candidates} kept, {how} (F {fscore:.3}, change {change:.3} against the exemplar's level 0)");
+            }
+            Kept::BestScoring { score } => log::warn!(
+                "level 0: none of {candidates} candidates passed (structure {:.2}, not cut short): the best ({score:.3}) is kept",
                 opts.level0_min_structure
-            );
+            ),
         }
-        Ok((x, level))
+        let kept = if matches!(why, Kept::BestScoring { .. }) { best } else { picked };
+        Ok(kept.expect("the kept candidate is held"))
     }
 
     /// The variant: one coarse-to-fine pass from its seed, or with
@@ -604,6 +685,52 @@ impl OneVariant<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::Level0Pick as Pick;
+
+    /// Offers (score, shrunken, F-score, change) in turn until the pick
+    /// stops; the candidates drawn and what was kept.
+    fn run_pick(pick: Pick, min: f64, candidates: &[(f64, bool, f64, f64)]) -> (usize, Option<(usize, Kept)>) {
+        let mut p = Level0Pick::new(pick, min);
+        let mut drawn = 0;
+        for (k, &(score, shrunken, f, change)) in candidates.iter().enumerate() {
+            drawn += 1;
+            if p.offer(k, score, shrunken, || (f, change)).stop {
+                break;
+            }
+        }
+        (drawn, p.kept())
+    }
+
+    #[test]
+    fn the_first_pick_keeps_the_first_that_passes_not_the_best_scoring() {
+        // Candidate 0 scores highest but is cut short: with the gate on it
+        // does not pass; candidate 2 is the first that does.
+        let c = [(0.95, true, 0.97, 0.03), (0.5, false, 0.99, 0.0), (0.85, false, 0.99, 0.0), (0.9, false, 0.9, 0.1)];
+        assert_eq!(run_pick(Pick::First, 0.8, &c), (3, Some((2, Kept::First))));
+        // The gate off (minimum 0): the first candidate passes, cut short or not.
+        assert_eq!(run_pick(Pick::First, 0.0, &c), (1, Some((0, Kept::First))));
+    }
+
+    #[test]
+    fn the_novel_pick_stops_at_the_first_new_enough_and_never_keeps_a_shape_cut_short() {
+        // 0: cut short and very new (a bunny without its ear tips); 1: a
+        // copy; 2: new enough; 3: never drawn.
+        let c = [(0.81, true, 0.96, 0.05), (0.99, false, 1.0, 0.0), (0.9, false, 0.98, 0.03), (0.9, false, 0.9, 0.2)];
+        assert_eq!(run_pick(Pick::Novel, 0.8, &c), (3, Some((2, Kept::NewEnough { fscore: 0.98, change: 0.03 }))));
+        // None new enough: the least like the exemplar of those that pass
+        // (the lower F-score; on a tie, the larger change).
+        let c = [(0.81, true, 0.9, 0.1), (0.9, false, 0.99, 0.01), (0.9, false, 0.988, 0.01), (0.9, false, 0.988, 0.02)];
+        assert_eq!(run_pick(Pick::Novel, 0.8, &c), (4, Some((3, Kept::LeastLike { fscore: 0.988, change: 0.02 }))));
+    }
+
+    #[test]
+    fn when_nothing_passes_the_best_scoring_is_kept() {
+        let c = [(0.5, false, 0.9, 0.1), (0.95, true, 0.9, 0.1), (0.7, false, 0.9, 0.1)];
+        for pick in [Pick::First, Pick::Novel] {
+            assert_eq!(run_pick(pick, 0.8, &c), (3, Some((1, Kept::BestScoring { score: 0.95 }))), "{pick:?}");
+        }
+        assert_eq!(Level0Pick::new(Pick::Novel, 0.8).kept(), None);
+    }
 
     #[test]
     fn a_resized_box_turns_the_size_flags_off_and_nothing_else() {
