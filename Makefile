@@ -41,13 +41,14 @@ define run_tests
 endef
 # The quick suite builds only the examples it runs (the integrator examples of
 # tests/commands.rs), after the test binaries (one cargo call compiles the
-# library and its unit tests side by side on two cores); `make test-slow`
-# builds every target, the benchmarks and tools included, so they keep
-# compiling (CI runs it).
+# library and its unit tests side by side on two cores; not the programs' own
+# test harnesses, which hold no tests: the programs the suite runs are built
+# for it); `make test-slow` builds every target, the benchmarks and tools
+# included, so they keep compiling (CI runs it).
 test: setup
-	cargo test --release $(CARGO_FEATURES) --lib --bins --tests --no-run
+	cargo test --release $(CARGO_FEATURES) --lib --tests --no-run
 	cargo build --release $(CARGO_FEATURES) --example encode_mesh --example read_level
-	$(call run_tests,--lib --bins --tests,)
+	$(call run_tests,--lib --tests,)
 test-slow: setup
 	$(call run_tests,,--ignored)
 
