@@ -29,7 +29,6 @@ fn main() -> anyhow::Result<()> {
     let (_, levels) = shapeshifter::io::dataset::read(&args.exemplar)?;
     let params = StructureParams::default();
     println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "copyF", "score");
-    println!("{:<14} {:>4} debris: share of the surface outside the largest component, variant / exemplar", "", "");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for ex in levels.iter().filter(|l| l.resolution <= args.max_resolution) {
@@ -40,7 +39,7 @@ fn main() -> anyhow::Result<()> {
             };
             let (vs, es) = (Structure::of(&v), Structure::of(ex));
             let s = StructureScores::new(&v, &vs, ex, &es, &params);
-            if std::env::var("PROBE_RAW").is_ok() { eprintln!("raw enclosure {} vs {}", Structure::of(&v).enclosure, Structure::of(ex).enclosure); }
+            if std::env::var("PROBE_RAW").is_ok() { eprintln!("raw enclosure {} vs {}", vs.enclosure, es.enclosure); }
             println!(
                 "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3}  {}",
                 ex.resolution,
@@ -55,7 +54,6 @@ fn main() -> anyhow::Result<()> {
                 s.score,
                 s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")
             );
-            println!("{:<14} {:>4} debris {:.4} / {:.4}", "", "", 1.0 - vs.largest_share(), 1.0 - es.largest_share());
         }
     }
     Ok(())

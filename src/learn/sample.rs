@@ -535,7 +535,7 @@ impl OneVariant<'_> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
         let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
         let Some((ex_level, ex_structure)) = reference.filter(|_| attempts > 1) else {
-            return self.pass(self.seed, resolution0, opts, from, self.last);
+            return Ok(self.pass(self.seed, resolution0, opts, from, self.last)?.0);
         };
         let (mut levels, cur) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
         let next = levels.len();
@@ -544,8 +544,8 @@ impl OneVariant<'_> {
     }
 
     /// The levels, up to the structure level, of the first of `attempts`
-    /// passes that is whole there, else of the best.
-    /// The pruned tensor of the last of them comes along, for the finer levels.
+    /// passes that is whole there, else of the best; with the kept pass's
+    /// pruned tensor of that level, for the finer levels.
     fn kept_attempt(
         &self,
         resolution0: u32,
@@ -557,7 +557,7 @@ impl OneVariant<'_> {
         let params = structure_params(opts);
         let mut best: Option<((u8, u8, f64), (Vec<Level>, SparseTensor))> = None;
         for a in 0..attempts {
-            let (levels, cur) = self.start(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
+            let (levels, cur) = self.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
             let level = &levels[ex_level.index];
             let rank = if level.is_empty() {
                 (0, 0, 0.0)
@@ -591,17 +591,12 @@ impl OneVariant<'_> {
         Ok(levels)
     }
 
-    /// One coarse-to-fine pass: level 0 from `level0_seed`, the finer levels
-    /// from the variant's own seed (so continuing from an unedited level
-    /// reproduces the finer levels of the pass that made it, whichever
-    /// attempt that was).
-    fn pass(&self, level0_seed: u64, resolution0: u32, opts: &SampleOptions, from: Option<&Level>, last: usize) -> Result<Vec<Level>> {
-        Ok(self.start(level0_seed, resolution0, opts, from, last)?.0)
-    }
-
-    /// [`Self::pass`] up to level `last` (at most the variant's last), with
-    /// the last level's pruned tensor.
-    fn start(
+    /// One coarse-to-fine pass up to level `last` (at most the variant's
+    /// last), with the last level's pruned tensor: level 0 from
+    /// `level0_seed` (or `from`, continued), the finer levels from the
+    /// variant's own seed (so continuing from an unedited level reproduces
+    /// the finer levels of the pass that made it, whichever attempt that was).
+    fn pass(
         &self,
         level0_seed: u64,
         resolution0: u32,
@@ -680,7 +675,6 @@ impl OneVariant<'_> {
         Ok(x)
     }
 }
-
 
 #[cfg(test)]
 mod tests {
