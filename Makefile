@@ -46,9 +46,9 @@ endef
 # for it); `make test-slow` builds every target, the benchmarks and tools
 # included, so they keep compiling (CI runs it).
 test: setup
-	cargo test --release $(CARGO_FEATURES) --lib --tests --no-run
+	cargo test --release $(CARGO_FEATURES) --lib --test suite --no-run
 	cargo build --release $(CARGO_FEATURES) --example encode_mesh --example read_level
-	$(call run_tests,--lib --tests,)
+	$(call run_tests,--lib --test suite,)
 test-slow: setup
 	$(call run_tests,,--ignored)
 

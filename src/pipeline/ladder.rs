@@ -77,7 +77,12 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
         Some(config) => {
             let t = Instant::now();
             let untrained = sample::untrained_models(config, trained_levels(config, &levels), device, options.seed).and_then(|m| {
-                sample_variants(&m, &levels, &SampleOptions::from_config(config, 1, options.seed), None)
+                // One level-0 shape and one pass: the rung is what the method
+                // makes of noise, and the whole-and-new search (16 candidates
+                // and retries at the demo profile) only spent half a minute
+                // finding that every one of them prunes away.
+                let one_pass = SampleOptions { level0_candidates: 1, level0_min_structure: 0.0, attempts: 1, ..SampleOptions::from_config(config, 1, options.seed) };
+                sample_variants(&m, &levels, &one_pass, None)
             });
             match untrained {
                 Ok(mut v) if v.first().and_then(|l| l.last()).is_some_and(|l| l.len() > 0 && l.index + 1 == levels.len()) => {
