@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Which measured figures of the README and docs are older than the code they
 measure: for every entry of docs/figures.toml, the commits after the one that
-wrote the figure (`measured_at`) that touched the code it depends on. Exits 1
+wrote the figure (`measured_at`) that changed the code it depends on (a commit
+that only rewords comments there does not count). Exits 1
 when any figure is stale (or its sample text is gone from its pages), 0 when
 every figure is current. `make figures-check` runs it.
 
@@ -20,6 +21,34 @@ def git(*args):
     return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True, text=True).stdout
 
 
+# What starts a whole-line comment, by file type (`#` in Rust starts an attribute).
+COMMENT_PREFIXES = {".rs": ("//", "/*"), ".cpp": ("//", "/*"), ".h": ("//", "/*"), ".hpp": ("//", "/*"),
+                    ".toml": ("#",), ".py": ("#",), ".sh": ("#",)}
+
+
+def changes_code(commit, paths):
+    """Whether `commit` changes a line of `paths` that is not blank and not
+    wholly a comment (`#` in TOML and scripts; `//`, `///` or a line opening
+    `/*` in Rust and C++): a comment cannot change a measured figure, so a
+    commit that only rewords one does not make the figures of its file
+    stale. A code line with a comment on it counts, and so does every line
+    of any other kind of file."""
+    diff = git("show", "--format=", "--unified=0", commit, "--", *paths)
+    prefixes = ()
+    for line in diff.splitlines():
+        if line.startswith("+++ ") or line.startswith("--- "):
+            name = line[4:]
+            if name != "/dev/null":
+                prefixes = COMMENT_PREFIXES.get(Path(name).suffix, ())
+            continue
+        if not line.startswith(("+", "-")):
+            continue
+        body = line[1:].strip()
+        if body and not (prefixes and body.startswith(prefixes)):
+            return True
+    return False
+
+
 def main():
     brief = "--brief" in sys.argv[1:]
     figures = tomllib.loads((ROOT / "docs/figures.toml").read_text())["figure"]
@@ -29,6 +58,7 @@ def main():
         try:
             git("cat-file", "-e", f["measured_at"] + "^{commit}")
             newer = git("log", "--format=%h %ad %s", "--date=short", f"{f['measured_at']}..HEAD", "--", *f["depends"]).splitlines()
+            newer = [line for line in newer if changes_code(line.split()[0], f["depends"])]
         except subprocess.CalledProcessError:
             newer, problems = [], [f"measured_at {f['measured_at']} is not a commit of this repository"]
         missing = [p for p in f["pages"] if f["sample"] not in (ROOT / p).read_text(errors="replace")]
