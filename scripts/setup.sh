@@ -61,5 +61,14 @@ if [ ! -f "$VENV/.complete" ]; then
 fi
 TORCH_PY_DIR=$(ls -d "$VENV"/lib/python3*/site-packages/torch | head -n1)
 ln -sfn "$TORCH_PY_DIR" .libtorch
+# cargo's LIBTORCH (included by .cargo/config.toml): the resolved path, the
+# same for every clone, so ccache hits on torch-sys's C++ in a fresh clone.
+# Rewritten only when it changes (torch-sys rebuilds when LIBTORCH does).
+want="[env]
+LIBTORCH = \"$(cd "$TORCH_PY_DIR" && pwd -P)\""
+if [ "$(cat .cargo/libtorch.toml 2>/dev/null)" != "$want" ]; then
+  printf '# Written by scripts/setup.sh.\n%s\n' "$want" > .cargo/libtorch.toml.tmp
+  mv .cargo/libtorch.toml.tmp .cargo/libtorch.toml
+fi
 
 echo "setup: ready (Rust $RUST_VERSION, libtorch at $(readlink .libtorch))" >&2

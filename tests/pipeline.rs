@@ -96,6 +96,42 @@ fn training_lowers_the_loss_at_level_0_and_1() {
     assert_eq!(r0.diffusion_loss_end, r0b.diffusion_loss_end);
 }
 
+/// Level 0's and level 1's weights do not depend on libtorch's thread count,
+/// not even when it changes while a level trains (a finished level's cores
+/// granted to one still training, pipeline::children): the same bytes with 1
+/// thread, 2 threads, and 1 thread granted 2 at the first step. (Level 0's
+/// differed with 2 threads when its target's blur used them.)
+#[test]
+fn weights_do_not_depend_on_the_thread_count() {
+    use shapeshifter::learn::checkpoint::{diffusion_checkpoint, thread_grant_path};
+    let _guard = serial();
+    let levels = sphere_levels(&[16, 32], DVec3::new(0.05, -0.1, 0.0), 0.55);
+    let config = tiny(&["model.channels=32", "train.level0_iterations=6", "train.upper_iterations=4",
+                        "train.upsampler_iterations=4", "train.crop=11"]);
+    let weights = |threads: i32, grant: Option<i32>| {
+        tch::set_num_threads(threads);
+        let dir = tempfile::tempdir().unwrap();
+        let mut files = Vec::new();
+        for k in 0..2 {
+            if let Some(g) = grant {
+                std::fs::write(thread_grant_path(dir.path(), k), g.to_string()).unwrap();
+            }
+            train_level(&TrainJob::new(&levels, k, &config, Device::Cpu, dir.path())).unwrap();
+            files.push(std::fs::read(diffusion_checkpoint(dir.path(), k)).unwrap());
+        }
+        (files, tch::get_num_threads())
+    };
+    let (one, _) = weights(1, None);
+    let (two, _) = weights(2, None);
+    let (granted, threads_after) = weights(1, Some(2));
+    tch::set_num_threads(1);
+    assert_eq!(threads_after, 2, "the grant was read");
+    for k in 0..2 {
+        assert!(one[k] == two[k], "level {k}: the weights differ between 1 and 2 threads");
+        assert!(one[k] == granted[k], "level {k}: the weights differ when 2 threads are granted while training");
+    }
+}
+
 #[test]
 fn checkpoint_round_trip_gives_the_same_outputs() {
     let _guard = serial();

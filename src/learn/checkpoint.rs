@@ -29,6 +29,13 @@ pub fn optimiser_checkpoint(dir: &Path, level: usize, network: &str) -> PathBuf 
 pub fn state_path(dir: &Path, level: usize) -> PathBuf {
     dir.join(format!("level_{level}_state.json"))
 }
+/// Libtorch threads granted to level `level`'s training process in `dir` (a
+/// number in a text file), written by the process that started it when the
+/// other levels' processes have ended and their cores are free; read while
+/// the level trains, removed when it ends.
+pub fn thread_grant_path(dir: &Path, level: usize) -> PathBuf {
+    dir.join(format!("level_{level}_threads.txt"))
+}
 /// Loss plot of level `level` in `dir`.
 pub fn loss_plot_path(dir: &Path, level: usize) -> PathBuf {
     dir.join(format!("level_{level}_loss.png"))

@@ -2,24 +2,29 @@
 //! as processes of their own (exactly the commands a cluster job runs), their
 //! logs, progress bars, failures and stop signals.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::train::training_cost;
 use crate::config::Config;
 use crate::error::{Error, Result};
+use crate::learn::checkpoint::thread_grant_path;
 
 /// Runs `child(k)` for every level in `todo`, at most `jobs` at a time, the
 /// costliest first ([`training_cost`]: the longest job must not start last);
 /// each child's stderr goes to
 /// `models/level_K_train.log`, and `progress` draws one bar per level from
-/// those logs. Fails, after the running children end, naming every level
-/// whose process failed and the last line of its log.
+/// those logs. Each child starts with `threads` libtorch threads; once no
+/// level waits, the `jobs x threads` threads are shared by the children still
+/// running ([`grant_free_cores`]). Fails, after the running children end,
+/// naming every level whose process failed and the last line of its log.
 pub fn train_in_processes(
     models: &Path,
     todo: &[usize],
     config: &Config,
     jobs: usize,
+    threads: i32,
     progress: bool,
     child: impl Fn(usize) -> std::process::Command,
 ) -> Result<()> {
@@ -36,7 +41,7 @@ pub fn train_in_processes(
     let style = indicatif::ProgressStyle::with_template("level {prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} {msg}")
         .expect("valid template");
     let mut running: Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)> = Vec::new();
-    let result = schedule(models, &mut queue, &mut running, jobs, &bars, &style, &total, &child);
+    let result = schedule(models, &mut queue, &mut running, (jobs, threads), &bars, &style, &total, &child);
     if result.is_err() && crate::util::interrupt::requested().is_none() {
         // Leave no orphan training on: stop the children still running.
         for (_, process, bar, _) in running.iter_mut() {
@@ -55,7 +60,7 @@ fn schedule(
     models: &Path,
     queue: &mut Vec<usize>,
     running: &mut Vec<(usize, std::process::Child, indicatif::ProgressBar, PathBuf)>,
-    jobs: usize,
+    (jobs, threads): (usize, i32),
     bars: &indicatif::MultiProgress,
     style: &indicatif::ProgressStyle,
     total: &dyn Fn(usize) -> usize,
@@ -67,6 +72,7 @@ fn schedule(
     // `--progress alf`: the steps of every level, finished and running.
     let all_steps: usize = queue.iter().map(|&k| total(k)).sum();
     let mut finished_steps = 0;
+    let mut granted: HashMap<usize, i32> = HashMap::new();
     while !queue.is_empty() || !running.is_empty() {
         // After a stop signal (forwarded to the children): start nothing
         // more, and wait for the running children to checkpoint and end.
@@ -75,6 +81,7 @@ fn schedule(
             let Some(k) = queue.pop() else { break };
             let log_path = models.join(format!("level_{k}_train.log"));
             let log = std::fs::File::create(&log_path).map_err(|e| Error::file(&log_path, e.to_string()))?;
+            let _ = std::fs::remove_file(thread_grant_path(models, k)); // an earlier run's
             let process = crate::util::interrupt::spawn(child(k).stdout(std::process::Stdio::null()).stderr(log))
                 .map_err(|e| Error::Invalid(format!("cannot start the training process of level {k} ({e})")))?;
             let bar = bars.add(indicatif::ProgressBar::new(total(k) as u64));
@@ -84,6 +91,8 @@ fn schedule(
         }
         if !failed.is_empty() || stopping {
             queue.clear(); // start nothing more after a failure or a stop
+        } else if queue.is_empty() {
+            grant_free_cores(models, running, jobs, threads, &mut granted);
         }
         std::thread::sleep(std::time::Duration::from_millis(if stopping { 50 } else { 500 }));
         let mut i = 0;
@@ -100,6 +109,7 @@ fn schedule(
                 Some(status) => {
                     finished_steps += total(*k);
                     crate::util::interrupt::forget(process);
+                    let _ = std::fs::remove_file(thread_grant_path(models, *k));
                     if status.success() {
                         bar.finish_with_message("done");
                     } else {
@@ -119,6 +129,39 @@ fn schedule(
     }
     log::info!("train: {count} levels on {} processes in {:.0} s", jobs.max(1), t0.elapsed().as_secs_f64());
     Ok(())
+}
+
+/// Once no level waits to start, the cores of the levels that finished go to
+/// those still training: the `jobs x threads` libtorch threads shared by the
+/// running children (the earlier started, the costlier, takes a remainder),
+/// each one's share written to its grant file ([`thread_grant_path`], read by
+/// the child about once a second) when it changes. With 2 cores and the
+/// `cpu` profile, level 0 trains on 2 threads once levels 1 and 2 are done.
+/// The weights do not depend on the thread count (learn::train).
+fn grant_free_cores(
+    models: &Path,
+    running: &[(usize, std::process::Child, indicatif::ProgressBar, PathBuf)],
+    jobs: usize,
+    threads: i32,
+    granted: &mut HashMap<usize, i32>,
+) {
+    if threads <= 0 || running.is_empty() {
+        return; // libtorch's own thread count (0) already takes every core
+    }
+    let mut order: Vec<usize> = running.iter().map(|r| r.0).collect();
+    order.sort_unstable(); // level 0 (the longest training) first
+    // Never more threads than cores (`--jobs` above the core count).
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get()) as i32;
+    let total = (jobs.max(1) as i32 * threads).min(cores).max(threads);
+    let n = order.len() as i32;
+    for (i, k) in order.into_iter().enumerate() {
+        let share = total / n + i32::from((i as i32) < total % n);
+        if granted.get(&k).copied().unwrap_or(threads) != share
+            && crate::util::fs::write_file(&thread_grant_path(models, k), share.to_string()).is_ok()
+        {
+            granted.insert(k, share);
+        }
+    }
 }
 
 /// Runs shards `0..n` of a stage as at most `jobs` concurrent child processes,

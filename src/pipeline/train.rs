@@ -59,7 +59,7 @@ pub fn train_concurrently(
     let models = paths.models();
     record_config(&models, config)?;
     let todo = levels_to_train(levels.len(), &manifest.source_sha256, config, &models);
-    train_in_processes(&models, &todo, config, jobs, progress, |k| {
+    train_in_processes(&models, &todo, config, jobs, threads, progress, |k| {
         let mut c = std::process::Command::new(exe);
         c.args(["--threads", &threads.to_string(), "stage", "train"])
             .arg(&paths.root)
@@ -198,7 +198,7 @@ pub fn train_folder(job: &TrainFolder) -> Result<Trained> {
     if job.level.is_none() && job.jobs > 1 {
         let todo = levels_to_train(levels.len(), &manifest.source_sha256, job.config, job.models);
         let c = &job.child;
-        train_in_processes(job.models, &todo, job.config, job.jobs, job.progress, |k| {
+        train_in_processes(job.models, &todo, job.config, job.jobs, c.threads.max(1), job.progress, |k| {
             let mut command = std::process::Command::new(c.exe);
             command
                 .args(["--threads", &c.threads.max(1).to_string(), "train"])

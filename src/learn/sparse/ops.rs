@@ -73,7 +73,13 @@ pub fn upsample_trilinear(coarse: &SparseTensor) -> Result<SparseTensor> {
 /// the box by one pass of a normalised 9^3 Gaussian (sigma = 1 voxel; weights sum to
 /// 1, applied separably) over the zero-filled box (zero outside it too); inactive
 /// voxels get mask -1; active voxels keep their true features (mask included).
+///
+/// On the CPU the blur runs on one libtorch thread: the convolution's result
+/// differs in its last bits with the thread count, and the level-0 weights
+/// trained on this target must not depend on how many threads a process has
+/// (or is granted while it trains). The box is at most a few thousand voxels.
 pub fn flood_blur(gt: &SparseTensor) -> Result<SparseTensor> {
+    let _one_thread = (gt.device() == Device::Cpu).then(OneThread::new);
     tch::no_grad(|| {
         let (bx, index) = gt.grid.dense_box()?;
         let (dev, kind) = (gt.device(), gt.feats.kind());
@@ -104,4 +110,21 @@ pub fn flood_blur(gt: &SparseTensor) -> Result<SparseTensor> {
         let _ = feats.index_copy_(0, &index, &gt.feats.detach());
         SparseTensor::new(Arc::new(bx), feats)
     })
+}
+
+/// libtorch's CPU thread count set to 1 until dropped, then restored.
+struct OneThread(i32);
+
+impl OneThread {
+    fn new() -> Self {
+        let before = tch::get_num_threads();
+        tch::set_num_threads(1);
+        OneThread(before)
+    }
+}
+
+impl Drop for OneThread {
+    fn drop(&mut self) {
+        tch::set_num_threads(self.0);
+    }
 }

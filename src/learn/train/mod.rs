@@ -29,10 +29,10 @@
 //! every `checkpoint_minutes`, on interruption and at the end; the state file is
 //! written after the weights, so it never claims more steps than were saved.
 
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::IVec3;
 use tch::{Device, Kind, Tensor};
@@ -50,7 +50,7 @@ pub mod optim;
 
 pub use crate::learn::checkpoint::{
     diffusion_checkpoint, diffusion_ema_checkpoint, loss_plot_path, optimiser_checkpoint, read_state, state_path,
-    upsampler_checkpoint, TrainState,
+    thread_grant_path, upsampler_checkpoint, TrainState,
 };
 use crate::util::seed::{derive_seed, Stream};
 
@@ -278,6 +278,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         session_start: t0,
         seconds_before,
     };
+    let grant = ThreadGrant::new(out_dir, level, device);
     let mut interrupted = false;
     // A stop signal (util::interrupt) ends training like the job's own flag:
     // after the current step, with a checkpoint.
@@ -316,7 +317,10 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
                 opt.clip_grad_norm(tc.grad_clip);
                 opt.step(lr(step, tc.upsampler_iterations, tc.upsampler_lr));
                 Ok(loss.double_value(&[]))
-            }, |s| ckpt.maybe(&base, false, s, Some((u, opt)), None).map(|_| ()))?;
+            }, |s| {
+                grant.poll();
+                ckpt.maybe(&base, false, s, Some((u, opt)), None).map(|_| ())
+            })?;
             up_now = r.0;
             up_rate = r.1;
             interrupted |= r.2;
@@ -343,7 +347,10 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
                 e.update();
             }
             Ok(loss)
-        }, |s| ckpt.maybe(&base, true, s, None, Some((d_ref, &diff_opt, &ema))).map(|_| ()))?;
+        }, |s| {
+            grant.poll();
+            ckpt.maybe(&base, true, s, None, Some((d_ref, &diff_opt, &ema))).map(|_| ())
+        })?;
         diff_now = r.0;
         diff_rate = r.1;
         interrupted |= r.2;
@@ -495,6 +502,43 @@ pub fn diffusion_step(
     opt.clip_grad_norm(clip);
     opt.step(lr);
     Ok(loss.double_value(&[]))
+}
+
+/// The libtorch threads the parent process grants this level's training
+/// ([`thread_grant_path`]): when the other levels' processes have ended, the
+/// last one left takes their cores (level 0 of the `cpu` profile trains
+/// alone for its last third or so). Read at most once a second; the weights
+/// do not depend on it (every step of the level is thread-count invariant:
+/// the level-0 target's blur runs on one thread, see `flood_blur`).
+struct ThreadGrant {
+    path: Option<PathBuf>,
+    level: usize,
+    checked: Cell<Instant>,
+}
+
+impl ThreadGrant {
+    fn new(out_dir: &Path, level: usize, device: Device) -> Self {
+        let path = (device == Device::Cpu).then(|| thread_grant_path(out_dir, level));
+        // The first poll at the first step.
+        let long_ago = Instant::now().checked_sub(Duration::from_secs(2)).unwrap_or_else(Instant::now);
+        ThreadGrant { path, level, checked: Cell::new(long_ago) }
+    }
+
+    fn poll(&self) {
+        let Some(path) = &self.path else { return };
+        if self.checked.get().elapsed() < Duration::from_secs(1) {
+            return;
+        }
+        self.checked.set(Instant::now());
+        let Ok(text) = std::fs::read_to_string(path) else { return };
+        match text.trim().parse::<i32>() {
+            Ok(n) if n > 0 && n != tch::get_num_threads() => {
+                log::info!("level {}: {n} libtorch threads from now on (granted: the cores of levels that finished)", self.level);
+                tch::set_num_threads(n);
+            }
+            _ => {}
+        }
+    }
 }
 
 /// A training loop with its progress bar.
