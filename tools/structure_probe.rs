@@ -10,7 +10,8 @@ use std::path::PathBuf;
 use clap::Parser;
 use shapeshifter::level::structure::{Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
 
-/// Prints mass and extent ratios, pieces, free-boundary shares, copy F-score,
+/// Prints mass and extent ratios, pieces, free-boundary shares, enclosure and
+/// thin-part ratios, copy F-score,
 /// score and flags per variant and level (16^3 .. 64^3).
 #[derive(Parser, Debug)]
 struct Args {
@@ -28,7 +29,7 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let (_, levels) = shapeshifter::io::dataset::read(&args.exemplar)?;
     let params = StructureParams::default();
-    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "copyF", "score");
+    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "score");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for ex in levels.iter().filter(|l| l.resolution <= args.max_resolution) {
@@ -41,7 +42,7 @@ fn main() -> anyhow::Result<()> {
             let s = StructureScores::new(&v, &vs, ex, &es, &params);
             if std::env::var("PROBE_RAW").is_ok() { eprintln!("raw enclosure {} vs {}", vs.enclosure, es.enclosure); }
             println!(
-                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3}  {}",
+                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3}  {}",
                 ex.resolution,
                 s.mass_ratio,
                 s.extent_ratio,
@@ -50,6 +51,7 @@ fn main() -> anyhow::Result<()> {
                 s.free_boundary,
                 s.exemplar_free_boundary,
                 s.enclosure_ratio,
+                s.thin_ratio,
                 s.copy_fscore,
                 s.score,
                 s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")
