@@ -116,13 +116,19 @@ pub fn thin_voxels(level: &Level, depth: f32) -> Vec<bool> {
             if level.mask[i] <= 0.0 {
                 return false;
             }
-            let n = level.normals[i];
+            // A network's normals are not unit length until written (the
+            // sampler's gate sees them before): normalised here, so the gate
+            // and `eval` of the written files count the same voxels.
+            let n = level.normals[i].normalize_or_zero();
+            if n == Vec3::ZERO {
+                return false;
+            }
             let p = level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i];
             let mut d = 0.75f32;
             while d <= depth {
                 let q = (p - n * d).floor().as_ivec3();
                 if let Some(&j) = index.get(q) {
-                    if j != i && level.normals[j].dot(n) < -0.2 {
+                    if j != i && level.normals[j].normalize_or_zero().dot(n) < -0.2 {
                         return true;
                     }
                 }
@@ -744,6 +750,13 @@ mod tests {
         let smaller = spheres(64, &[(Vec3::ZERO, 0.45)]);
         let sc = StructureScores::new(&smaller, &Structure::of(&smaller), &ball, &b, &p);
         assert_eq!(sc.thin_ratio, 1.0, "{sc:?}");
+        // Normals of any length (a network's, before they are written) count
+        // the same thin voxels as unit ones.
+        let mut short = exemplar.clone();
+        for (k, n) in short.normals.iter_mut().enumerate() {
+            *n *= if k % 2 == 0 { 0.3 } else { 1.7 };
+        }
+        assert_eq!(Structure::of(&short).thin, e.thin);
     }
 
     #[test]
