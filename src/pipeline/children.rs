@@ -155,7 +155,8 @@ fn grant_free_cores(
     let total = (jobs.max(1) as i32 * threads).min(cores).max(threads);
     let n = order.len() as i32;
     for (i, k) in order.into_iter().enumerate() {
-        let share = total / n + i32::from((i as i32) < total % n);
+        // Never below what the child started with (`--threads` as asked).
+        let share = (total / n + i32::from((i as i32) < total % n)).max(threads);
         if granted.get(&k).copied().unwrap_or(threads) != share
             && crate::util::fs::write_file(&thread_grant_path(models, k), share.to_string()).is_ok()
         {
