@@ -810,8 +810,8 @@ fn run_stage(stage: StageCmd, no_bars: bool, wait: bool) -> Result<()> {
             let reports = pipeline::run_train(&pipeline::RunPaths::new(&dir), &config, device(&dev)?, level, !no_bars)?;
             for r in &reports {
                 println!(
-                    "level {}: {} upsampler + {} diffusion steps, {:.0} s{}",
-                    r.level, r.upsampler_steps, r.diffusion_steps, r.seconds,
+                    "level {}: {} upsampler + {} diffusion steps, {:.0} s ({:.1} + {:.1} steps/s){}",
+                    r.level, r.upsampler_steps, r.diffusion_steps, r.seconds, r.upsampler_it_per_s, r.diffusion_it_per_s,
                     if r.finished { "" } else { " (not finished: run again to resume)" }
                 );
             }
