@@ -626,7 +626,8 @@ impl MethodChoice {
 /// How previews look.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ViewArgs {
-    /// Image width, pixels.
+    /// Image width, pixels (a contact sheet's tiles are 320 pixels; the
+    /// camera angles below apply to them).
     #[arg(long, default_value_t = 800)]
     pub width: u32,
     /// Image height, pixels.

@@ -92,6 +92,16 @@ fn ladder_and_contact_sheet_commands() {
     assert!(o.status.success(), "{}", stderr(&o));
     let sheet = image::open(&png).unwrap();
     assert!(sheet.width() >= 3 * 320, "{}", sheet.width());
+    // The camera applies to the sheet: another azimuth, another picture of the same size.
+    let png_turned = dir.path().join("sheet_turned.png");
+    let o = shapeshifter(&[
+        "render", enc.to_str().unwrap(), out.join("blob").to_str().unwrap(), out.join("washed_out").to_str().unwrap(),
+        "-o", png_turned.to_str().unwrap(), "--azimuth", "215",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let turned = image::open(&png_turned).unwrap();
+    assert_eq!((turned.width(), turned.height()), (sheet.width(), sheet.height()));
+    assert!(turned.to_rgb8().as_raw() != sheet.to_rgb8().as_raw(), "--azimuth did not turn the contact sheet's camera");
 
     // Bad input: one clear line, nothing written.
     let bad = dir.path().join("nothing_here");

@@ -30,11 +30,16 @@ pub const SHEET_MAX: usize = 36;
 /// Writes `OUT/contact_sheet.png` of (name, level) pairs, the first the
 /// reference; past [`SHEET_MAX`] entries, the first ones.
 pub fn write_contact_sheet(path: &Path, entries: &[(String, Level)]) -> Result<()> {
+    write_contact_sheet_with(path, entries, &render::SheetOptions::default())
+}
+
+/// [`write_contact_sheet`] from a given camera.
+pub fn write_contact_sheet_with(path: &Path, entries: &[(String, Level)], opts: &render::SheetOptions) -> Result<()> {
     if entries.len() > SHEET_MAX {
         log::info!("contact sheet: the first {} of {} shapes", SHEET_MAX, entries.len());
     }
     let refs: Vec<(String, &Level)> = entries.iter().take(SHEET_MAX).map(|(n, l)| (n.clone(), l)).collect();
-    let sheet = render::contact_sheet(&refs, &render::SheetOptions::default())?;
+    let sheet = render::contact_sheet(&refs, opts)?;
     render::save_png(&sheet, path)?;
     Ok(())
 }
@@ -146,13 +151,19 @@ pub fn write_report(paths: &RunPaths, n: usize, evaluation: Option<&crate::eval:
 
 /// The `render` command: one picture of a level file, a mesh or a point
 /// cloud (`up`: the exemplar's vertical axis, where the file does not say),
-/// or, given folders of level files, a contact sheet of their finest levels.
-/// Returns, for a contact sheet, what it holds (for the log).
+/// or, given folders of level files, a contact sheet of their finest levels
+/// from the same camera (`options`' azimuth and elevation; the sheet's tiles
+/// keep their own size). Returns, for a contact sheet, what it holds (for the log).
 pub fn render_inputs(inputs: &[PathBuf], output: &Path, options: &render::RenderOptions, up: Option<crate::level::Up>) -> Result<Option<String>> {
     use crate::io::exemplar::Exemplar;
     if inputs.iter().any(|p| p.is_dir()) {
         let entries = inputs.iter().map(|d| finest_in(d)).collect::<Result<Vec<_>>>()?;
-        write_contact_sheet(output, &entries)?;
+        let camera = render::SheetOptions {
+            azimuth_deg: options.azimuth_deg,
+            elevation_deg: options.elevation_deg,
+            ..Default::default()
+        };
+        write_contact_sheet_with(output, &entries, &camera)?;
         return Ok(Some(format!("contact sheet of {} folders -> {}", entries.len(), output.display())));
     }
     let [input] = inputs else {
