@@ -91,6 +91,7 @@ SEED ?= 1
 fuzz: build
 	cargo run --release $(CARGO_FEATURES) --example hostile_campaign -- --count $(COUNT) --seed $(SEED)
 
+# Also empties the build folder every clone of this machine shares (make setup).
 clean:
 	cargo clean
 
