@@ -67,7 +67,8 @@ fn is_usda(f: &crate::io::usd::UsdFormat) -> bool {
     *f == crate::io::usd::UsdFormat::Usda
 }
 
-fn one_f64() -> f64 {
+/// A serde default of 1 (ratios and weights that are neutral at 1).
+pub(crate) fn one_f64() -> f64 {
     1.0
 }
 fn is_one_f64(v: &f64) -> bool {
@@ -266,7 +267,7 @@ pub struct TrainConfig {
     /// phase's last step (0 and 1.0: a constant rate, the paper's).
     #[serde(default)]
     pub lr_warmup_steps: usize,
-    #[serde(default = "one")]
+    #[serde(default = "one_f64")]
     pub lr_final_ratio: f64,
     /// Exponential moving average of the diffusion weights, used for
     /// sampling: per step, ema = decay * ema + (1 - decay) * weights
@@ -601,9 +602,6 @@ impl Config {
     }
 }
 
-fn one() -> f64 {
-    1.0
-}
 
 fn digest_str(s: &str) -> String {
     crate::util::digest::short(s)

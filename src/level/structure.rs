@@ -438,7 +438,7 @@ pub struct StructureScores {
     /// exemplar has fewer than `min_exemplar_thin_share` of them). Not a
     /// term of `score`: the level-0 gate scores 16^3 shapes, where an ear is
     /// a voxel or two.
-    #[serde(default = "one")]
+    #[serde(default = "crate::config::one_f64")]
     pub thin_ratio: f64,
     /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
     /// (1: the exemplar's surface, voxel for voxel).
@@ -765,8 +765,4 @@ mod tests {
         assert_eq!(components(&c), vec![3, 2]);
         assert!(components(&[]).is_empty());
     }
-}
-
-fn one() -> f64 {
-    1.0
 }

@@ -28,13 +28,9 @@ pub fn finest_in(dir: &Path) -> Result<(String, Level)> {
 pub const SHEET_MAX: usize = 36;
 
 /// Writes `OUT/contact_sheet.png` of (name, level) pairs, the first the
-/// reference; past [`SHEET_MAX`] entries, the first ones.
-pub fn write_contact_sheet(path: &Path, entries: &[(String, Level)]) -> Result<()> {
-    write_contact_sheet_with(path, entries, &render::SheetOptions::default())
-}
-
-/// [`write_contact_sheet`] from a given camera.
-pub fn write_contact_sheet_with(path: &Path, entries: &[(String, Level)], opts: &render::SheetOptions) -> Result<()> {
+/// reference, from the camera of `opts`; past [`SHEET_MAX`] entries, the
+/// first ones.
+pub fn write_contact_sheet(path: &Path, entries: &[(String, Level)], opts: &render::SheetOptions) -> Result<()> {
     if entries.len() > SHEET_MAX {
         log::info!("contact sheet: the first {} of {} shapes", SHEET_MAX, entries.len());
     }
@@ -94,7 +90,7 @@ pub fn run_eval(paths: &RunPaths, n: usize) -> Result<Option<crate::eval::evalua
     };
     let mut sheet = vec![("exemplar".to_string(), levels[levels.len() - 1].clone())];
     sheet.extend(files.iter().map(|f| (format!("{}{}", f.name, flags(&f.name)), f.finest.clone())));
-    write_contact_sheet(&paths.contact_sheet(), &sheet)?;
+    write_contact_sheet(&paths.contact_sheet(), &sheet, &render::SheetOptions::default())?;
     write_report(paths, n, evaluation.as_ref())?;
     Ok(evaluation)
 }
@@ -163,7 +159,7 @@ pub fn render_inputs(inputs: &[PathBuf], output: &Path, options: &render::Render
             elevation_deg: options.elevation_deg,
             ..Default::default()
         };
-        write_contact_sheet_with(output, &entries, &camera)?;
+        write_contact_sheet(output, &entries, &camera)?;
         return Ok(Some(format!("contact sheet of {} folders -> {}", entries.len(), output.display())));
     }
     let [input] = inputs else {

@@ -125,7 +125,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
     }
     let checks = ladder::check(&evaluation.report.variants, colourful);
     let entries: Vec<(String, Level)> = files.into_iter().map(|f| (f.name, f.finest)).collect();
-    write_contact_sheet(&out.join(super::layout::CONTACT_SHEET), &entries)?;
+    write_contact_sheet(&out.join(super::layout::CONTACT_SHEET), &entries, &crate::render::SheetOptions::default())?;
     let outcome = LadderOutcome { options, evaluation, checks, skipped };
     let path = out.join("ladder.json");
     let text = serde_json::to_string_pretty(&outcome).map_err(|e| Error::file(&path, e.to_string()))?;
