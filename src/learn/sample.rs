@@ -321,13 +321,15 @@ struct OneVariant<'a> {
 
 /// The structural thresholds sampling compares with the exemplar. With a
 /// resized level-0 box (`extent` other than 1, 1, 1) the variant is meant to
-/// differ from the exemplar in size, so the size terms (fragment, shrunken)
-/// are off; pieces, tears, openings and the inside seen still count.
+/// differ from the exemplar in size, so the size terms (fragment, shrunken,
+/// and thin_part_lost, a count of voxels that shrinks with the box) are off;
+/// pieces, tears, openings and the inside seen still count.
 fn structure_params(opts: &SampleOptions) -> StructureParams {
     let mut params = StructureParams::default();
     if opts.extent != [1.0; 3] {
         params.min_extent_ratio = 0.0;
         params.min_mass_ratio = 0.0;
+        params.min_thin_ratio = 0.0;
     }
     params
 }
@@ -388,10 +390,13 @@ struct Offer {
 
 /// The level-0 pick as a policy over the candidates' figures, drawn one at a
 /// time: a candidate passes when its structure score reaches the minimum
-/// and, with the gate on (a minimum above 0), it is not cut short along an
-/// axis (`shrunken`: at 16^3 a bunny without its ear tips, 13 of 16 voxels,
-/// scores 0.81 and is "new" to the F-score; the finer levels shred the
-/// stubs; docs/results.md, "New shapes").
+/// and, with the gate on (a minimum above 0), it has lost no part: it is not
+/// cut short along an axis (`shrunken`: at 16^3 a bunny without its ear
+/// tips, 13 of 16 voxels, scores 0.81 and is "new" to the F-score; the finer
+/// levels shred the stubs) and keeps the exemplar's thin parts
+/// (`thin_part_lost`: a bunny whose back ear is gone inside the box is "new"
+/// too, F 0.97, and no finer level regrows the ear; docs/results.md, "New
+/// shapes" and "Thin parts at level 0").
 struct Level0Pick {
     novel: bool,
     min_structure: f64,
@@ -408,15 +413,16 @@ impl Level0Pick {
         Level0Pick { novel: pick == crate::config::Level0Pick::Novel, min_structure, best: None, newest: None, first: None }
     }
 
-    fn passes(&self, score: f64, shrunken: bool) -> bool {
-        score >= self.min_structure && (self.min_structure <= 0.0 || !shrunken)
+    fn passes(&self, score: f64, part_lost: bool) -> bool {
+        score >= self.min_structure && (self.min_structure <= 0.0 || !part_lost)
     }
 
-    /// Candidate `k` with its structure score and shrunken flag; `likeness`
+    /// Candidate `k` with its structure score and whether it lost a part
+    /// (`shrunken` or `thin_part_lost`); `likeness`
     /// (its F-score and largest changed region against the exemplar's level
     /// 0) is computed only when the novel pick needs it.
-    fn offer(&mut self, k: usize, score: f64, shrunken: bool, likeness: impl FnOnce() -> (f64, f64)) -> Offer {
-        let pass = self.passes(score, shrunken);
+    fn offer(&mut self, k: usize, score: f64, part_lost: bool, likeness: impl FnOnce() -> (f64, f64)) -> Offer {
+        let pass = self.passes(score, part_lost);
         let mut offer = Offer { best: false, picked: false, stop: false };
         if self.best.is_none_or(|(b, _)| score > b) {
             self.best = Some((score, k));
@@ -452,6 +458,18 @@ impl Level0Pick {
     }
 }
 
+/// A level-0 candidate's figures for [`Level0Pick`]: its structure score
+/// against the exemplar's level 0, and whether it lost a part (`shrunken` or
+/// `thin_part_lost`). An empty candidate scores 0 and has lost everything.
+fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params: &StructureParams) -> (f64, bool) {
+    use crate::level::structure::Flag;
+    if level.is_empty() {
+        return (0.0, true);
+    }
+    let s = StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, params);
+    (s.score, s.flags.iter().any(|f| matches!(f, Flag::Shrunken | Flag::ThinPartLost)))
+}
+
 impl OneVariant<'_> {
     /// Level 0 from the noise of `seed`, pruned.
     fn level0(&self, resolution0: u32, seed: u64, opts: &SampleOptions) -> Result<SparseTensor> {
@@ -485,17 +503,12 @@ impl OneVariant<'_> {
             if candidates == 1 {
                 return Ok((x, level));
             }
-            let (score, shrunken) = if level.is_empty() {
-                (0.0, true)
-            } else {
-                let s = StructureScores::new(&level, &Structure::of(&level), ex_level, ex_structure, &params);
-                (s.score, s.flags.contains(&crate::level::structure::Flag::Shrunken))
-            };
-            let offer = pick.offer(k, score, shrunken, || {
+            let (score, part_lost) = level0_gate(&level, ex_level, ex_structure, &params);
+            let offer = pick.offer(k, score, part_lost, || {
                 let m = crate::level::structure::Matching::of(&level, ex_level);
                 (m.fscore(), m.largest_change())
             });
-            log::debug!("level 0 candidate {k}: structure {score:.3}{}", if shrunken { ", shrunken" } else { "" });
+            log::debug!("level 0 candidate {k}: structure {score:.3}{}", if part_lost { ", a part lost" } else { "" });
             if offer.picked {
                 picked = Some((x.with_feats(x.feats.shallow_clone())?, level.clone()));
             }
@@ -681,14 +694,14 @@ mod tests {
     use super::*;
     use crate::config::Level0Pick as Pick;
 
-    /// Offers (score, shrunken, F-score, change) in turn until the pick
+    /// Offers (score, part lost, F-score, change) in turn until the pick
     /// stops; the candidates drawn and what was kept.
     fn run_pick(pick: Pick, min: f64, candidates: &[(f64, bool, f64, f64)]) -> (usize, Option<(usize, Kept)>) {
         let mut p = Level0Pick::new(pick, min);
         let mut drawn = 0;
-        for (k, &(score, shrunken, f, change)) in candidates.iter().enumerate() {
+        for (k, &(score, part_lost, f, change)) in candidates.iter().enumerate() {
             drawn += 1;
-            if p.offer(k, score, shrunken, || (f, change)).stop {
+            if p.offer(k, score, part_lost, || (f, change)).stop {
                 break;
             }
         }
@@ -718,6 +731,32 @@ mod tests {
     }
 
     #[test]
+    fn at_16_cubed_an_ear_lost_inside_the_box_is_a_part_lost_not_a_new_shape() {
+        use crate::testing::synthetic::sphere_union;
+        use glam::Vec3;
+        // A bunny at 16^3 (a voxel is 0.125): a body (radius 0.5) with two
+        // ears up from its top side by side, rods of spheres (radius 0.12, 2
+        // voxels across, 0.9 long, 4.8 voxels apart). Losing one ear leaves
+        // the box as it was (the other ear keeps its height).
+        let body = (Vec3::new(0.0, -0.45, 0.0), 0.5);
+        let ear = |x: f32| (0..10).map(move |k| (Vec3::new(x, -0.05 + 0.1 * k as f32, 0.0), 0.12));
+        let exemplar = sphere_union(16, &std::iter::once(body).chain(ear(-0.3)).chain(ear(0.3)).collect::<Vec<_>>());
+        let one_ear = sphere_union(16, &std::iter::once(body).chain(ear(-0.3)).collect::<Vec<_>>());
+        let e = Structure::of(&exemplar);
+        let p = StructureParams::default();
+        assert_eq!(level0_gate(&exemplar, &exemplar, &e, &p), (1.0, false));
+        let (score, part_lost) = level0_gate(&one_ear, &exemplar, &e, &p);
+        let m = crate::level::structure::Matching::of(&one_ear, &exemplar);
+        // What the pick saw before: a passing score and "new enough".
+        let sc = StructureScores::new(&one_ear, &Structure::of(&one_ear), &exemplar, &e, &p);
+        assert!(score >= 0.8 && m.fscore() < NEW_ENOUGH_LEVEL0_FSCORE, "score {score}, F {}: {sc:?}", m.fscore());
+        assert!(!sc.flags.contains(&crate::level::structure::Flag::Shrunken), "{sc:?}");
+        assert!(part_lost, "the ear is lost: thin voxels {} of {}: {sc:?}", Structure::of(&one_ear).thin, e.thin);
+        assert!(!Level0Pick::new(Pick::Novel, 0.8).passes(score, part_lost));
+        assert_eq!(level0_gate(&Level::default(), &exemplar, &e, &p), (0.0, true));
+    }
+
+    #[test]
     fn when_nothing_passes_the_best_scoring_is_kept() {
         let c = [(0.5, false, 0.9, 0.1), (0.95, true, 0.9, 0.1), (0.7, false, 0.9, 0.1)];
         for pick in [Pick::First, Pick::Novel] {
@@ -733,7 +772,7 @@ mod tests {
         assert_eq!(structure_params(&opts), StructureParams::default());
         opts.extent = [2.0, 1.0, 1.0];
         let p = structure_params(&opts);
-        assert_eq!((p.min_extent_ratio, p.min_mass_ratio), (0.0, 0.0));
+        assert_eq!((p.min_extent_ratio, p.min_mass_ratio, p.min_thin_ratio), (0.0, 0.0, 0.0));
         let d = StructureParams::default();
         assert_eq!((p.free_boundary_ratio, p.min_enclosure_ratio, p.max_seen_through_excess), (d.free_boundary_ratio, d.min_enclosure_ratio, d.max_seen_through_excess));
     }

@@ -696,26 +696,7 @@ mod tests {
     }
 
     /// The voxel shells of `spheres` (centre, radius) at `res`, merged.
-    fn spheres(res: u32, spheres: &[(Vec3, f64)]) -> Level {
-        let mut out: Option<Level> = None;
-        for &(c, r) in spheres {
-            let l = crate::testing::synthetic::sphere_levels(&[res], c.as_dvec3(), r).remove(0);
-            match out.as_mut() {
-                None => out = Some(l),
-                Some(o) => {
-                    let have: std::collections::HashSet<IVec3> = o.coords.iter().copied().collect();
-                    for i in (0..l.len()).filter(|&i| !have.contains(&l.coords[i])) {
-                        o.coords.push(l.coords[i]);
-                        o.offsets.push(l.offsets[i]);
-                        o.normals.push(l.normals[i]);
-                        o.colours.push(l.colours[i]);
-                        o.mask.push(l.mask[i]);
-                    }
-                }
-            }
-        }
-        out.expect("at least one sphere")
-    }
+    use crate::testing::synthetic::sphere_union as spheres;
 
     #[test]
     fn a_thin_part_lost_inside_the_box_is_flagged() {

@@ -46,3 +46,28 @@ pub fn sphere_levels(resolutions: &[u32], centre: DVec3, radius: f64) -> Vec<Lev
         })
         .collect()
 }
+
+/// The level at resolution `res` of the union of spheres (centre, radius in
+/// normalised units): each sphere's voxels ([`sphere_levels`]), a voxel two
+/// spheres share kept from the first. A body with ears and rods for the
+/// structure tests.
+pub fn sphere_union(res: u32, spheres: &[(Vec3, f64)]) -> Level {
+    let mut out: Option<Level> = None;
+    for &(c, r) in spheres {
+        let l = sphere_levels(&[res], c.as_dvec3(), r).remove(0);
+        match out.as_mut() {
+            None => out = Some(l),
+            Some(o) => {
+                let have: std::collections::HashSet<IVec3> = o.coords.iter().copied().collect();
+                for i in (0..l.len()).filter(|&i| !have.contains(&l.coords[i])) {
+                    o.coords.push(l.coords[i]);
+                    o.offsets.push(l.offsets[i]);
+                    o.normals.push(l.normals[i]);
+                    o.colours.push(l.colours[i]);
+                    o.mask.push(l.mask[i]);
+                }
+            }
+        }
+    }
+    out.expect("at least one sphere")
+}
