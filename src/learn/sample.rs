@@ -7,6 +7,8 @@
 //!    `level0_candidates` > 1, level-0 shapes are drawn, each from its own
 //!    noise; of those whose structure against the exemplar's level 0
 //!    ([`crate::level::structure`]) scores at least `level0_min_structure`,
+//!    and that lost no part (cut short, or a thin part gone: counted at 16^3
+//!    and again at 32^3 after the level-1 upsampler alone),
 //!    the first is kept, or with `level0_pick = novel` the least like the
 //!    exemplar's level 0 (else the best scoring): no variant starts from a
 //!    tiny blob or three pieces, nor, where the network learned its exemplar
@@ -43,7 +45,7 @@ use tch::{Device, Kind, Tensor};
 
 use crate::config::Config;
 use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Schedule, TRAINING_PARAMETERISATION};
-use crate::level::structure::{Structure, StructureParams, StructureScores};
+use crate::level::structure::{thin_voxels, Structure, StructureParams, StructureScores, THIN_DEPTH};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
 use crate::level::{Level, FEATURE_CHANNELS};
@@ -269,6 +271,11 @@ pub fn sample(
     let box0 = level0_box(exemplar0, opts.extent)?;
     let exemplar0_structure = Structure::of(exemplar0);
     let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
+    let exemplar1 = if last >= 1 && models.upsamplers.get(1).is_some_and(|u| u.is_some()) {
+        ThinAtLevel1::of(exemplar_levels, &structure_params(opts))
+    } else {
+        None
+    };
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
@@ -282,6 +289,7 @@ pub fn sample(
                     seed: variant_seed(opts.seed, i),
                     exemplar0: (exemplar0, &exemplar0_structure),
                     structure_reference: reference.as_ref().map(|(l, s)| (*l, s)),
+                    exemplar1,
                 };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
@@ -317,6 +325,42 @@ struct OneVariant<'a> {
     exemplar0: (&'a Level, &'a Structure),
     /// The exemplar's structure level and its structure (the attempts).
     structure_reference: Option<(&'a Level, &'a Structure)>,
+    /// The exemplar's level 1 and its thin-part voxel count: a level-0
+    /// candidate's thin parts are counted a level finer ([`ThinAtLevel1`]).
+    exemplar1: Option<ThinAtLevel1<'a>>,
+}
+
+/// The thin-part check of a level-0 candidate one level finer. At 16^3 a
+/// bunny's body is itself "thin" (3 voxels deep; 83 of its 299 voxels), so
+/// an ear gone is 10% of the thin voxels, as much as a ruined wall top of
+/// the demo tower, and the rim of the hole it leaves adds thin voxels back
+/// (thin ratio 0.81-0.96 with the ear gone). At 32^3 the body is not thin
+/// and the ear is: ratio 0.67-0.72 with the ear gone, 0.9 with it, 0.83 or
+/// more for the demo's and the tower's ruins (docs/results.md, "Thin parts
+/// at level 0"). The candidate is taken there by the level-1 upsampler
+/// alone (no diffusion steps: a fraction of a second).
+#[derive(Clone, Copy)]
+struct ThinAtLevel1<'a> {
+    level: &'a Level,
+    thin: usize,
+}
+
+impl ThinAtLevel1<'_> {
+    /// The exemplar's level 1 where it has thin parts enough to lose (the
+    /// share [`StructureParams::min_exemplar_thin_share`]).
+    fn of<'a>(exemplar_levels: &'a [Level], params: &StructureParams) -> Option<ThinAtLevel1<'a>> {
+        let level = exemplar_levels.get(1)?;
+        let thin = thin_voxels(level, THIN_DEPTH).iter().filter(|&&t| t).count();
+        let surface = level.mask.iter().filter(|&&m| m > 0.0).count();
+        (thin > 0 && thin as f64 >= params.min_exemplar_thin_share * surface as f64).then_some(ThinAtLevel1 { level, thin })
+    }
+
+    /// Thin-part voxels of `level1` (a candidate taken to level 1) over the
+    /// exemplar's.
+    fn ratio(&self, level1: &Level) -> f64 {
+        debug_assert_eq!(level1.resolution, self.level.resolution);
+        thin_voxels(level1, THIN_DEPTH).iter().filter(|&&t| t).count() as f64 / self.thin as f64
+    }
 }
 
 /// The structural thresholds sampling compares with the exemplar. With a
@@ -394,9 +438,10 @@ struct Offer {
 /// cut short along an axis (`shrunken`: at 16^3 a bunny without its ear
 /// tips, 13 of 16 voxels, scores 0.81 and is "new" to the F-score; the finer
 /// levels shred the stubs) and keeps the exemplar's thin parts
-/// (`thin_part_lost`: a bunny whose back ear is gone inside the box is "new"
-/// too, F 0.97, and no finer level regrows the ear; docs/results.md, "New
-/// shapes" and "Thin parts at level 0").
+/// (`thin_part_lost` at 16^3, and its thin voxels counted again one level
+/// finer, [`ThinAtLevel1`]: a bunny whose back ear is gone inside the box is
+/// "new" too, F 0.97, and no finer level regrows the ear; docs/results.md,
+/// "New shapes" and "Thin parts at level 0").
 struct Level0Pick {
     novel: bool,
     min_structure: f64,
@@ -417,11 +462,10 @@ impl Level0Pick {
         score >= self.min_structure && (self.min_structure <= 0.0 || !part_lost)
     }
 
-    /// Candidate `k` with its structure score and whether it lost a part
-    /// (`shrunken` or `thin_part_lost`); `likeness`
-    /// (its F-score and largest changed region against the exemplar's level
-    /// 0) is computed only when the novel pick needs it.
-    fn offer(&mut self, k: usize, score: f64, part_lost: bool, likeness: impl FnOnce() -> (f64, f64)) -> Offer {
+    /// Candidate `k` with its structure score, whether it lost a part
+    /// (`shrunken` or `thin_part_lost`) and its `likeness` (F-score and
+    /// largest changed region against the exemplar's level 0).
+    fn offer(&mut self, k: usize, score: f64, part_lost: bool, likeness: (f64, f64)) -> Offer {
         let pass = self.passes(score, part_lost);
         let mut offer = Offer { best: false, picked: false, stop: false };
         if self.best.is_none_or(|(b, _)| score > b) {
@@ -429,7 +473,7 @@ impl Level0Pick {
             offer.best = true;
         }
         if pass && self.novel {
-            let (fscore, change) = likeness();
+            let (fscore, change) = likeness;
             // Lower is less like the exemplar.
             let key = (fscore, -change);
             if self.newest.is_none_or(|(n, _)| key < n) {
@@ -458,16 +502,18 @@ impl Level0Pick {
     }
 }
 
-/// A level-0 candidate's figures for [`Level0Pick`]: its structure score
-/// against the exemplar's level 0, and whether it lost a part (`shrunken` or
-/// `thin_part_lost`). An empty candidate scores 0 and has lost everything.
-fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params: &StructureParams) -> (f64, bool) {
+/// A level-0 candidate's figures for [`Level0Pick`], against the exemplar's
+/// level 0: its structure score, whether it lost a part (`shrunken` or
+/// `thin_part_lost`), and its likeness (F-score, largest changed region). An
+/// empty candidate scores 0, has lost everything and is like nothing.
+fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params: &StructureParams) -> (f64, bool, (f64, f64)) {
     use crate::level::structure::Flag;
     if level.is_empty() {
-        return (0.0, true);
+        return (0.0, true, (0.0, 0.0));
     }
     let s = StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, params);
-    (s.score, s.flags.iter().any(|f| matches!(f, Flag::Shrunken | Flag::ThinPartLost)))
+    let part_lost = s.flags.iter().any(|f| matches!(f, Flag::Shrunken | Flag::ThinPartLost));
+    (s.score, part_lost, (s.copy_fscore, s.largest_change))
 }
 
 impl OneVariant<'_> {
@@ -482,8 +528,8 @@ impl OneVariant<'_> {
 
     /// Level 0 of this variant: of up to `level0_candidates` shapes, drawn
     /// one at a time, the one [`Level0Pick`] keeps: the first that passes
-    /// (its structure score reaches `level0_min_structure` and it is not
-    /// cut short) with pick `first`; with `novel` the first that passes and
+    /// (its structure score reaches `level0_min_structure` and it lost no
+    /// part, at 16^3 or, for thin parts, at 32^3) with pick `first`; with `novel` the first that passes and
     /// is new enough ([`NEW_ENOUGH_LEVEL0_FSCORE`]), else of all that pass
     /// the least like the exemplar's level 0 (the lowest 1-voxel-tolerant
     /// F-score, then the largest changed region); when none passes, the
@@ -503,11 +549,14 @@ impl OneVariant<'_> {
             if candidates == 1 {
                 return Ok((x, level));
             }
-            let (score, part_lost) = level0_gate(&level, ex_level, ex_structure, &params);
-            let offer = pick.offer(k, score, part_lost, || {
-                let m = crate::level::structure::Matching::of(&level, ex_level);
-                (m.fscore(), m.largest_change())
-            });
+            let (score, mut part_lost, likeness) = level0_gate(&level, ex_level, ex_structure, &params);
+            if !part_lost && pick.passes(score, false) && params.min_thin_ratio > 0.0 {
+                if let Some(ratio) = self.thin_ratio_at_level1(&x)? {
+                    log::debug!("level 0 candidate {k}: thin ratio {ratio:.3} one level finer");
+                    part_lost = ratio < params.min_thin_ratio;
+                }
+            }
+            let offer = pick.offer(k, score, part_lost, likeness);
             log::debug!("level 0 candidate {k}: structure {score:.3}{}", if part_lost { ", a part lost" } else { "" });
             if offer.picked {
                 picked = Some((x.with_feats(x.feats.shallow_clone())?, level.clone()));
@@ -534,6 +583,20 @@ impl OneVariant<'_> {
         }
         let kept = if matches!(why, Kept::BestScoring { .. }) { best } else { picked };
         Ok(kept.expect("the kept candidate is held"))
+    }
+
+    /// The thin-part voxels of level-0 candidate `x` taken to level 1 by the
+    /// upsampler alone, over the exemplar's level 1 ([`ThinAtLevel1`]); None
+    /// where the exemplar has no thin parts to lose there.
+    fn thin_ratio_at_level1(&self, x: &SparseTensor) -> Result<Option<f64>> {
+        let (Some(ex1), Some(Some(up))) = (self.exemplar1, self.models.upsamplers.get(1)) else {
+            return Ok(None);
+        };
+        if x.is_empty() {
+            return Ok(Some(0.0));
+        }
+        let level1 = up.net.forward_t(x, false)?.prune_by_mask()?.to_level(1, self.frame)?;
+        Ok(Some(ex1.ratio(&level1)))
     }
 
     /// The variant: one coarse-to-fine pass from its seed, or with
@@ -701,7 +764,7 @@ mod tests {
         let mut drawn = 0;
         for (k, &(score, part_lost, f, change)) in candidates.iter().enumerate() {
             drawn += 1;
-            if p.offer(k, score, part_lost, || (f, change)).stop {
+            if p.offer(k, score, part_lost, (f, change)).stop {
                 break;
             }
         }
@@ -744,16 +807,39 @@ mod tests {
         let one_ear = sphere_union(16, &std::iter::once(body).chain(ear(-0.3)).collect::<Vec<_>>());
         let e = Structure::of(&exemplar);
         let p = StructureParams::default();
-        assert_eq!(level0_gate(&exemplar, &exemplar, &e, &p), (1.0, false));
-        let (score, part_lost) = level0_gate(&one_ear, &exemplar, &e, &p);
+        assert_eq!(level0_gate(&exemplar, &exemplar, &e, &p), (1.0, false, (1.0, 0.0)));
+        let (score, part_lost, (fscore, _)) = level0_gate(&one_ear, &exemplar, &e, &p);
         let m = crate::level::structure::Matching::of(&one_ear, &exemplar);
+        assert_eq!(fscore, m.fscore());
         // What the pick saw before: a passing score and "new enough".
         let sc = StructureScores::new(&one_ear, &Structure::of(&one_ear), &exemplar, &e, &p);
         assert!(score >= 0.8 && m.fscore() < NEW_ENOUGH_LEVEL0_FSCORE, "score {score}, F {}: {sc:?}", m.fscore());
         assert!(!sc.flags.contains(&crate::level::structure::Flag::Shrunken), "{sc:?}");
         assert!(part_lost, "the ear is lost: thin voxels {} of {}: {sc:?}", Structure::of(&one_ear).thin, e.thin);
         assert!(!Level0Pick::new(Pick::Novel, 0.8).passes(score, part_lost));
-        assert_eq!(level0_gate(&Level::default(), &exemplar, &e, &p), (0.0, true));
+        assert_eq!(level0_gate(&Level::default(), &exemplar, &e, &p), (0.0, true, (0.0, 0.0)));
+    }
+
+    #[test]
+    fn one_level_finer_an_ear_lost_is_a_thin_part_lost_and_a_ball_has_none_to_lose() {
+        use crate::testing::synthetic::sphere_union;
+        use glam::Vec3;
+        // The bunny of the test above at 32^3 (a voxel is 0.0625): the ears
+        // (radius 0.12, 4 voxels across) are thin, the body is not.
+        let body = (Vec3::new(0.0, -0.45, 0.0), 0.5);
+        let ear = |x: f32| (0..10).map(move |k| (Vec3::new(x, -0.05 + 0.1 * k as f32, 0.0), 0.12));
+        let exemplar = sphere_union(32, &std::iter::once(body).chain(ear(-0.3)).chain(ear(0.3)).collect::<Vec<_>>());
+        let one_ear = sphere_union(32, &std::iter::once(body).chain(ear(-0.3)).collect::<Vec<_>>());
+        let p = StructureParams::default();
+        let levels = [Level::default(), exemplar.clone()];
+        let ex1 = ThinAtLevel1::of(&levels, &p).expect("the ears are thin parts");
+        assert_eq!(ex1.ratio(&exemplar), 1.0);
+        let r = ex1.ratio(&one_ear);
+        assert!(r < p.min_thin_ratio, "one ear of two lost: thin ratio {r}");
+        // A ball has no thin part to lose: no check.
+        let ball = sphere_union(32, &[body]);
+        assert!(ThinAtLevel1::of(&[Level::default(), ball], &p).is_none());
+        assert!(ThinAtLevel1::of(&levels[..1], &p).is_none(), "no level 1, no check");
     }
 
     #[test]
