@@ -8,10 +8,12 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use shapeshifter::level::structure::{Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
+use shapeshifter::level::structure::{Matching, Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
 
 /// Prints mass and extent ratios, pieces, free-boundary shares, enclosure and
-/// thin-part ratios, copy F-score,
+/// thin-part ratios, copy F-score, the exemplar's largest region the variant
+/// lacks and the voxels it has where the exemplar has none (`gone`, `added`:
+/// a part lost with nothing in its place is gone > 0, added 0),
 /// score and flags per variant and level (16^3 .. 64^3).
 #[derive(Parser, Debug)]
 struct Args {
@@ -29,7 +31,7 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let (_, levels) = shapeshifter::io::dataset::read(&args.exemplar)?;
     let params = StructureParams::default();
-    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "score");
+    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "score");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for ex in levels.iter().filter(|l| l.resolution <= args.max_resolution) {
@@ -40,9 +42,10 @@ fn main() -> anyhow::Result<()> {
             };
             let (vs, es) = (Structure::of(&v), Structure::of(ex));
             let s = StructureScores::new(&v, &vs, ex, &es, &params);
+            let (gone, added) = Matching::of(&v, ex).gone_and_added();
             if std::env::var("PROBE_RAW").is_ok() { eprintln!("raw enclosure {} vs {}", vs.enclosure, es.enclosure); }
             println!(
-                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3}  {}",
+                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6.3}  {}",
                 ex.resolution,
                 s.mass_ratio,
                 s.extent_ratio,
@@ -53,6 +56,8 @@ fn main() -> anyhow::Result<()> {
                 s.enclosure_ratio,
                 s.thin_ratio,
                 s.copy_fscore,
+                gone,
+                added,
                 s.score,
                 s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")
             );

@@ -570,6 +570,13 @@ impl Matching {
         components(&changed).first().map_or(0.0, |&c| c as f64 / m.b_voxels as f64)
     }
 
+    /// The voxels of `b`'s largest region that `a` lacks (none of `a`'s
+    /// within 1 voxel), and the voxels `a` has where `b` has none: an ear
+    /// gone with nothing in its place is (9, 0) on the bunny at 16^3.
+    pub fn gone_and_added(&self) -> (usize, usize) {
+        (components(&self.b_unmatched).first().copied().unwrap_or(0), self.a_unmatched.len())
+    }
+
     /// Share of `a`'s voxels with one of `b` within 1 voxel (0 when either
     /// is empty): below 1 where `a` has something `b` does not.
     pub fn precision(&self) -> f64 {
@@ -738,6 +745,20 @@ mod tests {
             *n *= if k % 2 == 0 { 0.3 } else { 1.7 };
         }
         assert_eq!(Structure::of(&short).thin, e.thin);
+    }
+
+    #[test]
+    fn a_cap_cut_off_is_gone_with_nothing_added_and_a_cap_moved_is_both() {
+        let whole = sphere(32, 0.7, |_| true);
+        assert_eq!(Matching::of(&whole, &whole).gone_and_added(), (0, 0));
+        // The cap above y = 0.5 (a sphere's shell, 1-voxel tolerance: the
+        // voxels more than a voxel above the cut are gone, as one region).
+        let capless = sphere(32, 0.7, |p| p.y < 0.5);
+        let (gone, added) = Matching::of(&capless, &whole).gone_and_added();
+        let above = (0..whole.len()).filter(|&i| whole.point_normalised(i).y > 0.5 + 2.0 / 16.0).count();
+        assert!(gone >= above && gone < whole.len() / 4 && added == 0, "gone {gone}, added {added}, {above} above the cut");
+        // The other way round the cap is added and nothing is gone.
+        assert_eq!(Matching::of(&whole, &capless).gone_and_added(), (0, gone));
     }
 
     #[test]
