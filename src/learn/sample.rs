@@ -335,7 +335,7 @@ struct OneVariant<'a> {
 /// an ear gone is 10% of the thin voxels, as much as a ruined wall top of
 /// the demo tower, and the rim of the hole it leaves adds thin voxels back
 /// (thin ratio 0.81-0.96 with the ear gone). At 32^3 the body is not thin
-/// and the ear is: ratio 0.67-0.72 with the ear gone, 0.9 with it, 0.83 or
+/// and the ear is: ratio 0.58-0.72 with the ear gone, 0.9 with it, 0.83 or
 /// more for the demo's and the tower's ruins (docs/results.md, "Thin parts
 /// at level 0"). The candidate is taken there by the level-1 upsampler
 /// alone (no diffusion steps: a fraction of a second).
