@@ -185,6 +185,13 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     let o = sample("0,1,1");
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("positive") && !huge.exists(), "{}", stderr(&o));
+    // Sampling that stops at level 0 still has level 1's upsampler for the
+    // level-0 choice's thin-part count, so a variant's level 0 does not
+    // depend on where its pass stops.
+    let config = shapeshifter::config::Config::read(&models.join("config.toml")).unwrap();
+    let m = shapeshifter::learn::sample::load_models(&models, &config, 1, tch::Device::Cpu).unwrap();
+    assert_eq!((m.levels(), m.upsamplers.len()), (1, 2));
+    assert!(m.upsamplers[0].is_none() && m.upsamplers[1].is_some(), "level 1's upsampler is not loaded with level 0");
     // A bad --set is bad usage: 2, one line, nothing run.
     let o = shapeshifter(&["run", good.to_str().unwrap(), "-o", dir.path().join("bad").to_str().unwrap(), "--set", "mesh.nope=1"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

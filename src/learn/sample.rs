@@ -45,7 +45,7 @@ use tch::{Device, Kind, Tensor};
 
 use crate::config::Config;
 use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Schedule, TRAINING_PARAMETERISATION};
-use crate::level::structure::{thin_voxels, Structure, StructureParams, StructureScores, THIN_DEPTH};
+use crate::level::structure::{thin_count, Structure, StructureParams, StructureScores};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
 use crate::level::{Level, FEATURE_CHANNELS};
@@ -60,7 +60,9 @@ pub struct Models {
     pub device: Device,
     /// Diffusion model of each level, coarsest first.
     pub diffusion: Vec<LevelNet<DiffusionNet>>,
-    /// Upsampler of each level (`None` at level 0).
+    /// Upsampler of each level (`None` at level 0). With one level loaded,
+    /// level 1's where it is trained: the level-0 choice uses it
+    /// ([`ThinAtLevel1`]).
     pub upsamplers: Vec<Option<LevelNet<Upsampler>>>,
 }
 
@@ -99,6 +101,16 @@ pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -
             u.load(&p)?;
             upsamplers.push(Some(u));
         }
+    }
+    // Sampling that stops at level 0 still counts thin parts a level finer,
+    // so a variant's level 0 does not depend on where its pass stops
+    // (`--stop-level 0`, then `--from`); where level 1 is not trained yet,
+    // the count is off.
+    let p = upsampler_checkpoint(dir, 1);
+    if levels == 1 && p.exists() {
+        let mut u = new_upsampler(&config.model, device)?;
+        u.load(&p)?;
+        upsamplers.push(Some(u));
     }
     Ok(Models { config: config.clone(), device, diffusion, upsamplers })
 }
@@ -271,11 +283,8 @@ pub fn sample(
     let box0 = level0_box(exemplar0, opts.extent)?;
     let exemplar0_structure = Structure::of(exemplar0);
     let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
-    let exemplar1 = if last >= 1 && models.upsamplers.get(1).is_some_and(|u| u.is_some()) {
-        ThinAtLevel1::of(exemplar_levels, &structure_params(opts))
-    } else {
-        None
-    };
+    // Also when sampling stops at level 0 (see `Models::upsamplers`).
+    let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
@@ -350,7 +359,7 @@ impl ThinAtLevel1<'_> {
     /// share [`StructureParams::min_exemplar_thin_share`]).
     fn of<'a>(exemplar_levels: &'a [Level], params: &StructureParams) -> Option<ThinAtLevel1<'a>> {
         let level = exemplar_levels.get(1)?;
-        let thin = thin_voxels(level, THIN_DEPTH).iter().filter(|&&t| t).count();
+        let thin = thin_count(level);
         let surface = level.mask.iter().filter(|&&m| m > 0.0).count();
         (thin > 0 && thin as f64 >= params.min_exemplar_thin_share * surface as f64).then_some(ThinAtLevel1 { level, thin })
     }
@@ -359,7 +368,7 @@ impl ThinAtLevel1<'_> {
     /// exemplar's.
     fn ratio(&self, level1: &Level) -> f64 {
         debug_assert_eq!(level1.resolution, self.level.resolution);
-        thin_voxels(level1, THIN_DEPTH).iter().filter(|&&t| t).count() as f64 / self.thin as f64
+        thin_count(level1) as f64 / self.thin as f64
     }
 }
 
@@ -793,18 +802,27 @@ mod tests {
         assert_eq!(run_pick(Pick::Novel, 0.8, &c), (4, Some((3, Kept::LeastLike { fscore: 0.988, change: 0.02 }))));
     }
 
-    #[test]
-    fn at_16_cubed_an_ear_lost_inside_the_box_is_a_part_lost_not_a_new_shape() {
+    /// A bunny at `res`^3 made of spheres: a body (radius 0.5) with two ears
+    /// up from its top side by side, rods of spheres (radius 0.12, 0.9 long,
+    /// 0.6 apart); the same with one ear; the body alone.
+    fn bunny_of_spheres(res: u32) -> (Level, Level, Level) {
         use crate::testing::synthetic::sphere_union;
         use glam::Vec3;
-        // A bunny at 16^3 (a voxel is 0.125): a body (radius 0.5) with two
-        // ears up from its top side by side, rods of spheres (radius 0.12, 2
-        // voxels across, 0.9 long, 4.8 voxels apart). Losing one ear leaves
-        // the box as it was (the other ear keeps its height).
         let body = (Vec3::new(0.0, -0.45, 0.0), 0.5);
         let ear = |x: f32| (0..10).map(move |k| (Vec3::new(x, -0.05 + 0.1 * k as f32, 0.0), 0.12));
-        let exemplar = sphere_union(16, &std::iter::once(body).chain(ear(-0.3)).chain(ear(0.3)).collect::<Vec<_>>());
-        let one_ear = sphere_union(16, &std::iter::once(body).chain(ear(-0.3)).collect::<Vec<_>>());
+        (
+            sphere_union(res, &std::iter::once(body).chain(ear(-0.3)).chain(ear(0.3)).collect::<Vec<_>>()),
+            sphere_union(res, &std::iter::once(body).chain(ear(-0.3)).collect::<Vec<_>>()),
+            sphere_union(res, &[body]),
+        )
+    }
+
+    #[test]
+    fn at_16_cubed_an_ear_lost_inside_the_box_is_a_part_lost_not_a_new_shape() {
+        // At 16^3 (a voxel is 0.125) the ears are 2 voxels across, 4.8
+        // apart. Losing one ear leaves the box as it was (the other ear keeps
+        // its height).
+        let (exemplar, one_ear, _) = bunny_of_spheres(16);
         let e = Structure::of(&exemplar);
         let p = StructureParams::default();
         assert_eq!(level0_gate(&exemplar, &exemplar, &e, &p), (1.0, false, (1.0, 0.0)));
@@ -822,14 +840,9 @@ mod tests {
 
     #[test]
     fn one_level_finer_an_ear_lost_is_a_thin_part_lost_and_a_ball_has_none_to_lose() {
-        use crate::testing::synthetic::sphere_union;
-        use glam::Vec3;
-        // The bunny of the test above at 32^3 (a voxel is 0.0625): the ears
-        // (radius 0.12, 4 voxels across) are thin, the body is not.
-        let body = (Vec3::new(0.0, -0.45, 0.0), 0.5);
-        let ear = |x: f32| (0..10).map(move |k| (Vec3::new(x, -0.05 + 0.1 * k as f32, 0.0), 0.12));
-        let exemplar = sphere_union(32, &std::iter::once(body).chain(ear(-0.3)).chain(ear(0.3)).collect::<Vec<_>>());
-        let one_ear = sphere_union(32, &std::iter::once(body).chain(ear(-0.3)).collect::<Vec<_>>());
+        // At 32^3 (a voxel is 0.0625) the ears (4 voxels across) are thin,
+        // the body is not.
+        let (exemplar, one_ear, ball) = bunny_of_spheres(32);
         let p = StructureParams::default();
         let levels = [Level::default(), exemplar.clone()];
         let ex1 = ThinAtLevel1::of(&levels, &p).expect("the ears are thin parts");
@@ -837,7 +850,6 @@ mod tests {
         let r = ex1.ratio(&one_ear);
         assert!(r < p.min_thin_ratio, "one ear of two lost: thin ratio {r}");
         // A ball has no thin part to lose: no check.
-        let ball = sphere_union(32, &[body]);
         assert!(ThinAtLevel1::of(&[Level::default(), ball], &p).is_none());
         assert!(ThinAtLevel1::of(&levels[..1], &p).is_none(), "no level 1, no check");
     }

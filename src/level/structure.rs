@@ -75,7 +75,7 @@ impl Structure {
             free_boundary: free_boundary(level).iter().filter(|&&b| b).count(),
             enclosure: enclosure(&coords),
             seen_through: super::seen_through::seen_through(level),
-            thin: thin_voxels(level, THIN_DEPTH).iter().filter(|&&t| t).count(),
+            thin: thin_count(level),
         }
     }
 
@@ -137,6 +137,12 @@ pub fn thin_voxels(level: &Level, depth: f32) -> Vec<bool> {
             false
         })
         .collect()
+}
+
+/// How many surface voxels of `level` are on a thin part ([`thin_voxels`]
+/// at [`THIN_DEPTH`]).
+pub fn thin_count(level: &Level) -> usize {
+    thin_voxels(level, THIN_DEPTH).iter().filter(|&&t| t).count()
 }
 
 /// Sizes of the 26-connected components of a voxel set, largest first.
