@@ -330,6 +330,17 @@ pub struct SampleConfig {
     /// structure level (64^3); else the best is kept.
     #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
     pub attempts: usize,
+    /// With `attempts` > 1, a pass whose structure level is a near copy of
+    /// the exemplar's (the `near_copy` flag) is not kept while attempts are
+    /// left: the first whole pass that is not a copy is; when none is, a
+    /// whole copy before anything broken. Not written when off, so the
+    /// digests of configurations without it stay valid.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub reject_copies: bool,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 /// Which level-0 candidate a variant keeps (`sample.level0_pick`).
@@ -444,13 +455,14 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 7] = [
+        let defaults: [(&str, &str, toml::Value); 8] = [
             ("sample", "final_step", toml::Value::String("prediction".into())),
             ("sample", "level0_pick", toml::Value::String("first".into())),
             ("sample", "level0_sampler", toml::Value::String("same".into())),
             ("sample", "level0_candidates", toml::Value::Integer(1)),
             ("sample", "level0_min_structure", toml::Value::Float(0.0)),
             ("sample", "attempts", toml::Value::Integer(1)),
+            ("sample", "reject_copies", toml::Value::Boolean(false)),
             ("train", "bf16", toml::Value::Boolean(false)),
         ];
         for (section, key, value) in defaults {
@@ -766,6 +778,7 @@ mod tests {
             "sample.level0_candidates=1",
             "sample.level0_min_structure=0.0",
             "sample.attempts=1",
+            "sample.reject_copies=false",
             "sample.level0_pick=first",
             "sample.level0_sampler=same",
             "sample.level0_steps=50",

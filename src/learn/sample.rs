@@ -16,7 +16,9 @@
 //!    With `attempts` > 1, the whole coarse-to-fine pass is repeated from
 //!    new level-0 noise until the variant is whole at the structure level
 //!    (64^3): the faults that level 0 cannot show yet (a
-//!    wall that breaks at 32^3) are caught where they appear.
+//!    wall that breaks at 32^3) are caught where they appear; with
+//!    `reject_copies`, until it is whole and not a near copy of the exemplar
+//!    there (a whole copy is kept before a broken shape).
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
 //!    process from there with `upper_steps` steps; prune.
@@ -45,7 +47,7 @@ use tch::{Device, Kind, Tensor};
 
 use crate::config::Config;
 use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Schedule, TRAINING_PARAMETERISATION};
-use crate::level::structure::{thin_count, Structure, StructureParams, StructureScores};
+use crate::level::structure::{thin_count, Flag, Structure, StructureParams, StructureScores};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
 use crate::level::{Level, FEATURE_CHANNELS};
@@ -181,6 +183,9 @@ pub struct SampleOptions {
     /// Coarse-to-fine passes per variant at most, until one is whole at the
     /// structure level (1: one pass, no check).
     pub attempts: usize,
+    /// Whether a whole pass that is a near copy is passed over while
+    /// attempts are left (`sample.reject_copies`).
+    pub reject_copies: bool,
 }
 
 impl SampleOptions {
@@ -202,6 +207,7 @@ impl SampleOptions {
             level0_pick: config.sample.level0_pick,
             level0_sampler: config.sample.level0_sampler.or(config.sample.sampler),
             attempts: config.sample.attempts,
+            reject_copies: config.sample.reject_copies,
         }
     }
 }
@@ -387,6 +393,57 @@ fn structure_params(opts: &SampleOptions) -> StructureParams {
     params
 }
 
+/// How one coarse-to-fine attempt came out at the structure level.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttemptRank {
+    /// No broken structure flag.
+    pub whole: bool,
+    /// Not a near copy of the exemplar.
+    pub new: bool,
+    /// [`StructureScores::score`].
+    pub score: f64,
+}
+
+impl AttemptRank {
+    /// Whether the attempt ends the search: whole, and with
+    /// `reject_copies` also new.
+    pub fn accepted(&self, reject_copies: bool) -> bool {
+        self.whole && (self.new || !reject_copies)
+    }
+
+    /// Fallback order: whole first, then new, then by score (a whole copy
+    /// before a broken new shape: a copy is still a shape a user can use).
+    fn key(&self) -> (bool, bool, f64) {
+        (self.whole, self.new, self.score)
+    }
+}
+
+/// Runs `attempt(0)`, `attempt(1)`, ... until one is
+/// [`AttemptRank::accepted`] or `attempts` have run; returns the index, rank
+/// and payload of the accepted one, else of the best by the fallback order
+/// (the first of equals). Whole is the criterion; with `reject_copies`,
+/// whole and not a near copy. (Before the seen-through flag, rejecting
+/// copies on the ruined tower traded them for towers split open at 64^3
+/// that the flags called whole, docs/results.md "Whole shapes"; that flag
+/// now sees those.)
+pub fn keep_attempt<T>(
+    attempts: usize,
+    reject_copies: bool,
+    mut attempt: impl FnMut(usize) -> Result<(AttemptRank, T)>,
+) -> Result<(usize, AttemptRank, T)> {
+    let mut best: Option<(usize, AttemptRank, T)> = None;
+    for a in 0..attempts.max(1) {
+        let (rank, payload) = attempt(a)?;
+        if rank.accepted(reject_copies) {
+            return Ok((a, rank, payload));
+        }
+        if best.as_ref().is_none_or(|(_, b, _)| rank.key().partial_cmp(&b.key()) == Some(std::cmp::Ordering::Greater)) {
+            best = Some((a, rank, payload));
+        }
+    }
+    Ok(best.expect("at least one attempt"))
+}
+
 /// The seed of attempt `a` of a variant (attempt 0 is the variant's own seed).
 fn attempt_seed(seed: u64, a: usize) -> u64 {
     if a == 0 {
@@ -516,7 +573,6 @@ impl Level0Pick {
 /// `thin_part_lost`), and its likeness (F-score, largest changed region). An
 /// empty candidate scores 0, has lost everything and is like nothing.
 fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params: &StructureParams) -> (f64, bool, (f64, f64)) {
-    use crate::level::structure::Flag;
     if level.is_empty() {
         return (0.0, true, (0.0, 0.0));
     }
@@ -628,9 +684,9 @@ impl OneVariant<'_> {
         Ok(levels)
     }
 
-    /// The levels, up to the structure level, of the first of `attempts`
-    /// passes that is whole there, else of the best; with the kept pass's
-    /// pruned tensor of that level, for the finer levels.
+    /// The levels, up to the structure level, of the pass [`keep_attempt`]
+    /// keeps of `attempts`; with its pruned tensor of that level, for the
+    /// finer levels.
     fn kept_attempt(
         &self,
         resolution0: u32,
@@ -640,40 +696,31 @@ impl OneVariant<'_> {
         attempts: usize,
     ) -> Result<(Vec<Level>, SparseTensor)> {
         let params = structure_params(opts);
-        let mut best: Option<((u8, u8, f64), (Vec<Level>, SparseTensor))> = None;
-        for a in 0..attempts {
+        let (a, rank, kept) = keep_attempt(attempts, opts.reject_copies, |a| {
             let (levels, cur) = self.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
             let level = &levels[ex_level.index];
             let rank = if level.is_empty() {
-                (0, 0, 0.0)
+                AttemptRank { whole: false, new: false, score: 0.0 }
             } else {
                 let s = StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, &params);
-                let copy = s.flags.contains(&crate::level::structure::Flag::NearCopy);
                 log::debug!("attempt {a}: structure {:.3} {:?}", s.score, s.flags);
-                (s.whole() as u8, (!copy) as u8, s.score)
+                AttemptRank { whole: s.whole(), new: !s.flags.contains(&Flag::NearCopy), score: s.score }
             };
-            let better = best.as_ref().is_none_or(|(r, _)| rank.partial_cmp(r) == Some(std::cmp::Ordering::Greater));
-            // Whole is the criterion. Near copies are not rejected: on the
-            // ruined tower that traded copies for towers split open at 64^3,
-            // which the flags call whole (docs/results.md, "Whole shapes"); the copy
-            // rank only orders the fallback.
-            if rank.0 == 1 {
-                if a > 0 {
-                    log::info!("variant kept at attempt {a} (structure {:.3} at {}^3)", rank.2, ex_level.resolution);
-                }
-                return Ok((levels, cur));
-            }
-            if better {
-                best = Some((rank, (levels, cur)));
+            Ok((rank, (levels, cur)))
+        })?;
+        let res = ex_level.resolution;
+        match (rank.accepted(opts.reject_copies), rank.whole) {
+            (true, _) if a > 0 => log::info!("variant kept at attempt {a} (structure {:.3} at {res}^3)", rank.score),
+            (true, _) => {}
+            (false, true) => log::warn!(
+                "every attempt of {attempts} whole at {res}^3 was a near copy of the exemplar: the best kept (structure {:.3})",
+                rank.score
+            ),
+            (false, false) => {
+                log::warn!("no attempt of {attempts} was whole at {res}^3: the best kept (structure {:.3})", rank.score)
             }
         }
-        let (rank, levels) = best.expect("at least one attempt");
-        log::warn!(
-            "no attempt of {attempts} was whole at {}^3: the best kept (structure {:.3})",
-            ex_level.resolution,
-            rank.2
-        );
-        Ok(levels)
+        Ok(kept)
     }
 
     /// One coarse-to-fine pass up to level `last` (at most the variant's
@@ -765,6 +812,35 @@ impl OneVariant<'_> {
 mod tests {
     use super::*;
     use crate::config::Level0Pick as Pick;
+
+    /// Runs [`keep_attempt`] over fixed outcomes (whole, new, score); the
+    /// attempts run and the one kept.
+    fn run_attempts(reject_copies: bool, outcomes: &[(bool, bool, f64)]) -> (usize, usize) {
+        let mut ran = 0;
+        let (kept, _, payload) = keep_attempt(outcomes.len(), reject_copies, |a| {
+            ran += 1;
+            let (whole, new, score) = outcomes[a];
+            Ok((AttemptRank { whole, new, score }, a))
+        })
+        .unwrap();
+        assert_eq!(kept, payload);
+        (ran, kept)
+    }
+
+    #[test]
+    fn a_whole_copy_is_passed_over_for_a_whole_new_shape_but_kept_before_a_broken_one() {
+        let copy_then_new = [(true, false, 0.99), (false, true, 0.9), (true, true, 0.8), (true, true, 0.95)];
+        // Without the rejection the first whole pass ends the search, copy or not.
+        assert_eq!(run_attempts(false, &copy_then_new), (1, 0));
+        // With it the copy and the broken pass are passed over; the first
+        // whole new one is kept even though a later one scores higher.
+        assert_eq!(run_attempts(true, &copy_then_new), (3, 2));
+        // No whole new pass: the whole copy is kept before broken new shapes
+        // of higher score, and every attempt was tried.
+        assert_eq!(run_attempts(true, &[(false, true, 0.97), (true, false, 0.6), (false, true, 0.99)]), (3, 1));
+        // Nothing whole: the best score of the broken (new before copy).
+        assert_eq!(run_attempts(true, &[(false, false, 0.9), (false, true, 0.5), (false, true, 0.7)]), (3, 2));
+    }
 
     /// Offers (score, part lost, F-score, change) in turn until the pick
     /// stops; the candidates drawn and what was kept.
