@@ -335,12 +335,8 @@ pub struct SampleConfig {
     /// left: the first whole pass that is not a copy is; when none is, a
     /// whole copy before anything broken. Not written when off, so the
     /// digests of configurations without it stay valid.
-    #[serde(default, skip_serializing_if = "is_false")]
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub reject_copies: bool,
-}
-
-fn is_false(b: &bool) -> bool {
-    !*b
 }
 
 /// Which level-0 candidate a variant keeps (`sample.level0_pick`).
