@@ -337,6 +337,13 @@ pub struct SampleConfig {
     /// digests of configurations without it stay valid.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub reject_copies: bool,
+    /// Where the exemplar is a height field without a hole through it (a
+    /// terrain, a cliff), every level sampled or transferred has its holes
+    /// through the sheet closed before the next level is made
+    /// (`level::height_field::fill_holes`); other exemplars are not touched.
+    /// Not written when off.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub fill_holes: bool,
 }
 
 /// Which level-0 candidate a variant keeps (`sample.level0_pick`).
@@ -451,7 +458,7 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 8] = [
+        let defaults: [(&str, &str, toml::Value); 9] = [
             ("sample", "final_step", toml::Value::String("prediction".into())),
             ("sample", "level0_pick", toml::Value::String("first".into())),
             ("sample", "level0_sampler", toml::Value::String("same".into())),
@@ -459,6 +466,7 @@ impl Config {
             ("sample", "level0_min_structure", toml::Value::Float(0.0)),
             ("sample", "attempts", toml::Value::Integer(1)),
             ("sample", "reject_copies", toml::Value::Boolean(false)),
+            ("sample", "fill_holes", toml::Value::Boolean(false)),
             ("train", "bf16", toml::Value::Boolean(false)),
         ];
         for (section, key, value) in defaults {
@@ -775,6 +783,7 @@ mod tests {
             "sample.level0_min_structure=0.0",
             "sample.attempts=1",
             "sample.reject_copies=false",
+            "sample.fill_holes=false",
             "sample.level0_pick=first",
             "sample.level0_sampler=same",
             "sample.level0_steps=50",

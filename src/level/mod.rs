@@ -6,6 +6,7 @@
 
 pub mod edit;
 pub mod files;
+pub mod height_field;
 pub mod seen_through;
 pub mod structure;
 

@@ -56,6 +56,14 @@ pub struct Structure {
     /// wall, a fin).
     #[serde(default)]
     pub thin: usize,
+    /// Per axis, the share of occupied columns that hold one unbroken run of
+    /// voxels, and the empty columns the occupied ones enclose
+    /// ([`super::height_field`]: a height field along an axis, and the holes
+    /// through it).
+    #[serde(default)]
+    pub single_run: [f64; 3],
+    #[serde(default)]
+    pub enclosed_columns: [usize; 3],
 }
 
 impl Structure {
@@ -76,7 +84,15 @@ impl Structure {
             enclosure: enclosure(&coords),
             seen_through: super::seen_through::seen_through(level),
             thin: thin_count(level),
+            single_run: super::height_field::single_run_shares(level),
+            enclosed_columns: super::height_field::enclosed_counts(level),
         }
+    }
+
+    /// The axis along which this shape (an exemplar's level) is a height
+    /// field without a hole through it: where a variant's holes are counted.
+    pub fn sheet_axis(&self) -> Option<usize> {
+        super::height_field::height_axis(&self.single_run).filter(|&a| self.enclosed_columns[a] == 0)
     }
 
     /// Components holding at least [`PIECE_SHARE`] of the voxels.
@@ -347,6 +363,13 @@ pub struct StructureParams {
     /// The thin-part flag applies when the exemplar has at least this share
     /// of its surface voxels on thin parts (a sphere has none to lose).
     pub min_exemplar_thin_share: f64,
+    /// Where the exemplar is a height field without a hole (a terrain, a
+    /// cliff; [`Structure::sheet_axis`]), more columns with no surface
+    /// inside the footprint than this share of the exemplar's surface voxels:
+    /// holed. 0.001, measured (docs/results.md, "Holes through a sheet"):
+    /// 3 columns at 64^3 on the terrain of ../shared/data, where its
+    /// variants with holes seen from above have 3-62.
+    pub max_hole_share: f64,
 }
 
 impl Default for StructureParams {
@@ -362,6 +385,7 @@ impl Default for StructureParams {
             max_seen_through_excess: 0.02,
             min_thin_ratio: 0.8,
             min_exemplar_thin_share: 0.02,
+            max_hole_share: 0.001,
         }
     }
 }
@@ -395,6 +419,9 @@ pub enum Flag {
     /// Far fewer voxels on thin parts than the exemplar: an ear, a spire or
     /// a fin lost or cut short.
     ThinPartLost,
+    /// Holes through a sheet the exemplar has none in (a terrain seen from
+    /// above with the sky through it).
+    Holed,
     /// Nearly the exemplar itself.
     NearCopy,
 }
@@ -409,6 +436,7 @@ impl Flag {
             Flag::Open => "open",
             Flag::SeenThrough => "seen_through",
             Flag::ThinPartLost => "thin_part_lost",
+            Flag::Holed => "holed",
             Flag::NearCopy => "near_copy",
         }
     }
@@ -446,6 +474,11 @@ pub struct StructureScores {
     /// a voxel or two.
     #[serde(default = "crate::config::one_f64")]
     pub thin_ratio: f64,
+    /// Where the exemplar is a sheet ([`Structure::sheet_axis`]), the columns
+    /// inside the variant's footprint with no surface along that axis: holes
+    /// through it (0 elsewhere).
+    #[serde(default)]
+    pub hole_columns: usize,
     /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
     /// (1: the exemplar's surface, voxel for voxel).
     pub copy_fscore: f64,
@@ -454,7 +487,7 @@ pub struct StructureScores {
     #[serde(default)]
     pub largest_change: f64,
     /// One figure in [0, 1], 1 = the exemplar's structure: the worst of the
-    /// mass, extent, piece, free-boundary, enclosure and seen-through terms
+    /// mass, extent, piece, free-boundary, enclosure, seen-through and hole terms
     /// ([`StructureScores::new`]).
     pub score: f64,
     pub flags: Vec<Flag>,
@@ -468,7 +501,8 @@ impl StructureScores {
     /// at most 1); free boundary (the torn limit
     /// [`StructureParams::free_boundary_limit`] / the variant's share, at most
     /// 1: below 1 exactly when flagged torn); enclosure (variant / exemplar, at most 1);
-    /// seen through (the limit / the excess, at most 1: below 1 exactly when flagged).
+    /// seen through (the limit / the excess, at most 1: below 1 exactly when flagged);
+    /// holes (the limit / the hole columns, at most 1: below 1 exactly when flagged).
     pub fn new(shape_level: &Level, s: &Structure, exemplar_level: &Level, e: &Structure, p: &StructureParams) -> Self {
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
         let sym = |r: f64| if r > 0.0 { r.min(1.0 / r) } else { 0.0 };
@@ -483,6 +517,8 @@ impl StructureScores {
         } else {
             1.0
         };
+        let hole_columns = e.sheet_axis().map_or(0, |a| s.enclosed_columns[a]);
+        let hole_limit = p.max_hole_share * e.voxels as f64;
         let terms = [
             sym(mass_ratio),
             axis_ratios.iter().map(|&r| sym(r)).fold(1.0, f64::min),
@@ -494,6 +530,7 @@ impl StructureScores {
             } else {
                 1.0
             },
+            if hole_columns > 0 { (hole_limit / hole_columns as f64).min(1.0) } else { 1.0 },
         ];
         let matching = Matching::of(shape_level, exemplar_level);
         let (copy_fscore, largest_change) = (matching.fscore(), matching.largest_change());
@@ -519,6 +556,9 @@ impl StructureScores {
         if thin_ratio < p.min_thin_ratio {
             flags.push(Flag::ThinPartLost);
         }
+        if hole_columns as f64 > hole_limit {
+            flags.push(Flag::Holed);
+        }
         if copy_fscore >= p.copy_fscore && largest_change < p.copy_max_change {
             flags.push(Flag::NearCopy);
         }
@@ -533,6 +573,7 @@ impl StructureScores {
             enclosure_ratio,
             seen_through_excess,
             thin_ratio,
+            hole_columns,
             copy_fscore,
             largest_change,
             score: terms.iter().copied().fold(1.0, f64::min),

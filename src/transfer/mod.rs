@@ -403,13 +403,17 @@ pub fn transfer(
 /// Levels `coarse.index + 1 ..= last` of a variant by detail transfer from
 /// `exemplar_levels`, starting from its level `coarse`; each level's matches
 /// start from the voxels the previous transferred level copied. `seed`: the
-/// variant's seed.
+/// variant's seed. `fill_axes`: per level, the axis along which holes through
+/// the sheet are closed after the copy ([`crate::level::height_field::fill_holes`];
+/// empty: none are); the voxels added were copied from nowhere, so the next
+/// level's matches start at random there.
 pub fn extend(
     exemplar_levels: &[Level],
     coarse: &Level,
     last: usize,
     cfg: &TransferConfig,
     seed: u64,
+    fill_axes: &[Option<usize>],
 ) -> Result<Vec<Level>, TransferError> {
     if last >= exemplar_levels.len() {
         return Err(TransferError::Invalid(format!(
@@ -430,9 +434,18 @@ pub fn extend(
             cfg,
             derive_seed(seed, l as u64, Stream::Transfer, 0),
         )?;
-        log::info!("transfer: level {l} ({}^3, {} voxels) in {:.2} s", next.level.resolution, next.level.len(), t.elapsed().as_secs_f64());
-        sources = Some(next.sources);
-        out.push(next.level);
+        let Transferred { mut level, sources: mut copied } = next;
+        if let Some(axis) = fill_axes.get(l).copied().flatten() {
+            let (filled, added) = crate::level::height_field::fill_holes(&level, axis);
+            if added > 0 {
+                log::debug!("transfer: level {l}: {added} voxels close holes through the sheet");
+                copied.resize(filled.len(), IVec3::splat(i32::MIN));
+                level = filled;
+            }
+        }
+        log::info!("transfer: level {l} ({}^3, {} voxels) in {:.2} s", level.resolution, level.len(), t.elapsed().as_secs_f64());
+        sources = Some(copied);
+        out.push(level);
     }
     Ok(out)
 }

@@ -159,3 +159,30 @@ fn the_thread_count_does_not_change_the_result() {
     assert_eq!(one, run(3, 5), "3 threads gave another level than 1");
     assert_ne!(one.2, run(1, 6).2, "another seed chose the same sources: the draws matter nowhere here");
 }
+
+/// A cap of a sphere is a sheet (a height field along y). A hole punched
+/// through the coarse level stays through every transferred level, unless
+/// the levels are mended as they are made.
+#[test]
+fn holes_through_a_sheet_are_closed_level_by_level_where_asked() {
+    use crate::level::height_field::{enclosed_columns, fill_axis};
+    let cap = |l: &mut Level| {
+        let ys: Vec<f64> = (0..l.len()).map(|i| l.point_normalised(i).y).collect();
+        l.retain(|i| ys[i] > 0.25);
+    };
+    let mut levels = sphere_levels(&[16, 32, 64], DVec3::ZERO, 0.6);
+    levels.iter_mut().for_each(cap);
+    let axes: Vec<Option<usize>> = levels.iter().map(fill_axis).collect();
+    assert_eq!(axes, vec![Some(1); 3]);
+    let mut holed = levels[0].clone();
+    let ps: Vec<DVec3> = (0..holed.len()).map(|i| holed.point_normalised(i)).collect();
+    holed.retain(|i| ps[i].x.abs() > 0.2 || ps[i].z.abs() > 0.2);
+    assert!(!enclosed_columns(&holed, 1).is_empty());
+    let plain = extend(&levels, &holed, 2, &on(), 3, &[]).unwrap();
+    assert!(plain.iter().all(|l| !enclosed_columns(l, 1).is_empty()));
+    let mended = extend(&levels, &holed, 2, &on(), 3, &axes).unwrap();
+    for l in &mended {
+        assert!(enclosed_columns(l, 1).is_empty(), "level {}", l.index);
+        l.check().unwrap();
+    }
+}

@@ -354,7 +354,7 @@ impl EvalReport {
         s += "(22: on the half-resolution lattice); detail: neighbour-normal angles vs the exemplar's (W1, RMS ratio);\n";
         s += "colour: colour patches matched both ways (F-score, coverage; n/a: a one-colour exemplar); chamfer0: level-0 points,\n";
         s += "normalised units; struct: the shape as a whole vs the exemplar at the structure level (1 = its structure),\n";
-        s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost (not whole), near_copy\n";
+        s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed (not whole), near_copy\n";
         s
     }
 }
