@@ -339,11 +339,11 @@ pub struct SampleConfig {
     pub reject_copies: bool,
     /// Where the exemplar is a height field without a hole through it (a
     /// terrain, a cliff), every level sampled or transferred has its holes
-    /// through the sheet closed before the next level is made
-    /// (`level::height_field::fill_holes`); other exemplars are not touched.
+    /// through the sheet and cracks at its steps closed before the next level is made
+    /// (`level::height_field::mend_sheet`); other exemplars are not touched.
     /// Not written when off.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub fill_holes: bool,
+    pub mend_sheets: bool,
 }
 
 /// Which level-0 candidate a variant keeps (`sample.level0_pick`).
@@ -466,7 +466,7 @@ impl Config {
             ("sample", "level0_min_structure", toml::Value::Float(0.0)),
             ("sample", "attempts", toml::Value::Integer(1)),
             ("sample", "reject_copies", toml::Value::Boolean(false)),
-            ("sample", "fill_holes", toml::Value::Boolean(false)),
+            ("sample", "mend_sheets", toml::Value::Boolean(false)),
             ("train", "bf16", toml::Value::Boolean(false)),
         ];
         for (section, key, value) in defaults {
@@ -783,7 +783,7 @@ mod tests {
             "sample.level0_min_structure=0.0",
             "sample.attempts=1",
             "sample.reject_copies=false",
-            "sample.fill_holes=false",
+            "sample.mend_sheets=false",
             "sample.level0_pick=first",
             "sample.level0_sampler=same",
             "sample.level0_steps=50",

@@ -187,8 +187,8 @@ pub struct SampleOptions {
     /// attempts are left (`sample.reject_copies`).
     pub reject_copies: bool,
     /// Whether holes through a sheet are closed level by level, where the
-    /// exemplar is one (`sample.fill_holes`).
-    pub fill_holes: bool,
+    /// exemplar is one (`sample.mend_sheets`).
+    pub mend_sheets: bool,
 }
 
 impl SampleOptions {
@@ -211,7 +211,7 @@ impl SampleOptions {
             level0_sampler: config.sample.level0_sampler.or(config.sample.sampler),
             attempts: config.sample.attempts,
             reject_copies: config.sample.reject_copies,
-            fill_holes: config.sample.fill_holes,
+            mend_sheets: config.sample.mend_sheets,
         }
     }
 }
@@ -295,7 +295,7 @@ pub fn sample(
     let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
     // Also when sampling stops at level 0 (see `Models::upsamplers`).
     let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
-    let fill_axes = if opts.fill_holes { fill_axes(exemplar_levels) } else { Vec::new() };
+    let mend_axes = if opts.mend_sheets { mend_axes(exemplar_levels) } else { Vec::new() };
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
@@ -310,7 +310,7 @@ pub fn sample(
                     exemplar0: (exemplar0, &exemplar0_structure),
                     structure_reference: reference.as_ref().map(|(l, s)| (*l, s)),
                     exemplar1,
-                    fill_axes: &fill_axes,
+                    mend_axes: &mend_axes,
                 };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
@@ -319,15 +319,15 @@ pub fn sample(
 }
 
 /// Per exemplar level, the axis along which a variant's same level has its
-/// holes through the sheet closed (`sample.fill_holes`). Whether the exemplar
+/// holes through the sheet closed (`sample.mend_sheets`). Whether the exemplar
 /// is a sheet is decided once, at its structure level (64^3), where walls are
 /// walls: at 16^3 a tower's wall is one run of voxels per column as a
 /// terrain's slope is (0.93 of the ruined tower's columns along its height, against 0.28 at
 /// 64^3). A level is mended only where the exemplar's same level has no hole
 /// along that axis.
-pub fn fill_axes(exemplar_levels: &[Level]) -> Vec<Option<usize>> {
-    use crate::level::height_field::{enclosed_columns, fill_axis};
-    let axis = crate::level::structure::structure_level(exemplar_levels).and_then(fill_axis);
+pub fn mend_axes(exemplar_levels: &[Level]) -> Vec<Option<usize>> {
+    use crate::level::height_field::{enclosed_columns, mend_axis};
+    let axis = crate::level::structure::structure_level(exemplar_levels).and_then(mend_axis);
     exemplar_levels
         .iter()
         .map(|l| axis.filter(|&a| enclosed_columns(l, a).is_empty()))
@@ -366,8 +366,8 @@ struct OneVariant<'a> {
     /// candidate's thin parts are counted a level finer ([`ThinAtLevel1`]).
     exemplar1: Option<ThinAtLevel1<'a>>,
     /// Per level, the axis along which its holes are closed
-    /// ([`crate::level::height_field::fill_axis`]; empty: none are).
-    fill_axes: &'a [Option<usize>],
+    /// ([`crate::level::height_field::mend_axis`]; empty: none are).
+    mend_axes: &'a [Option<usize>],
 }
 
 /// The thin-part check of a level-0 candidate one level finer. At 16^3 a
@@ -811,14 +811,14 @@ impl OneVariant<'_> {
 
     /// `level` (and its pruned tensor `pruned`) with its holes through the
     /// sheet closed where the exemplar is a sheet at this level
-    /// (`sample.fill_holes`); else as it is.
+    /// (`sample.mend_sheets`); else as it is.
     fn mended(&self, pruned: SparseTensor, level: Level) -> Result<(SparseTensor, Level)> {
-        let Some(axis) = self.fill_axes.get(level.index).copied().flatten() else { return Ok((pruned, level)) };
-        let (filled, added) = crate::level::height_field::fill_holes(&level, axis);
+        let Some(axis) = self.mend_axes.get(level.index).copied().flatten() else { return Ok((pruned, level)) };
+        let (filled, added) = crate::level::height_field::mend_sheet(&level, axis);
         if added == 0 {
             return Ok((pruned, level));
         }
-        log::debug!("level {}: {added} voxels close holes through the sheet", level.index);
+        log::debug!("level {}: {added} voxels mend the sheet (holes through it, cracks at steps)", level.index);
         // Back through the tensor, so the level's rows are in the grid's order as ever.
         let pruned = SparseTensor::from_level(&filled, self.models.device)?.prune_by_mask()?;
         let level = pruned.to_level(level.index, self.frame)?;

@@ -113,28 +113,28 @@ pub fn enclosed_counts(level: &Level) -> [usize; 3] {
     [0, 1, 2].map(|axis| enclosed_columns(level, axis).len())
 }
 
-/// The axis along which a variant's level `l` may be mended by [`fill_holes`]:
+/// The axis along which a variant's level `l` may be mended by [`mend_sheet`]:
 /// the exemplar's level `l` is a height field along it and has no hole
 /// through it (so a terrain with an arch of its own is left as it is).
-pub fn fill_axis(exemplar_level: &Level) -> Option<usize> {
+pub fn mend_axis(exemplar_level: &Level) -> Option<usize> {
     let axis = height_axis(&single_run_shares(exemplar_level))?;
     enclosed_columns(exemplar_level, axis).is_empty().then_some(axis)
 }
 
-/// `level` with every hole through it along `axis` closed, and how many
-/// voxels were added (appended after the level's own rows; none when there
-/// is no hole). Columns are filled from the hole's rim inwards: each takes
-/// the mean height, normal and colour of its filled or occupied neighbours
-/// (8 around), and voxels are added below or above it where a neighbour's
-/// run is more than a voxel away, so the surface stays 26-connected across
-/// a steep slope. The detail is then the finer levels' (a network's or the
-/// detail transfer's), which see a sheet without a gap.
-pub fn fill_holes(level: &Level, axis: usize) -> (Level, usize) {
+/// `level` mended as a sheet along `axis`: every hole through it closed and
+/// every crack at a step bridged; with how many voxels were added (appended
+/// after the level's own rows). A hole's columns are filled from its rim
+/// inwards: each takes the mean height, normal and colour of its filled or
+/// occupied neighbours (8 around). Then, wherever two side-by-side columns'
+/// runs are more than a voxel apart (a crack the detail transfer leaves
+/// between regions copied at different heights, or a filled column beside
+/// a steep slope), the lower run is raised to meet the higher, so the
+/// surface is 26-connected as the exemplar's is. The detail is the finer
+/// levels' (a network's or the detail transfer's), which see a sheet
+/// without a gap.
+pub fn mend_sheet(level: &Level, axis: usize) -> (Level, usize) {
     let holes = enclosed_columns(level, axis);
     let mut out = level.clone();
-    if holes.is_empty() {
-        return (out, 0);
-    }
     let cols = columns(level, axis);
     // Per column: height (voxels along the axis, the surface points' mean),
     // normal, colour, and the run's lowest and highest voxel.
@@ -189,43 +189,65 @@ pub fn fill_holes(level: &Level, axis: usize) -> (Level, usize) {
         left.retain(|c| !known.contains_key(c));
     }
     let (u, v) = across(axis);
-    let mut added = 0;
     let mut existing: VoxelMap<()> = (0..out.len()).map(|i| (out.coords[i], ())).collect();
-    for c in filled {
-        let col = known[&c];
-        let h = col.height.floor() as i32;
-        // Reach to within a voxel of each 4-neighbour's run.
-        let (mut low, mut high) = (h, h);
-        for d in [IVec2::X, -IVec2::X, IVec2::Y, -IVec2::Y] {
-            if let Some(n) = known.get(&(c + d)) {
-                if n.high < low - 1 {
-                    low = n.high + 1;
-                }
-                if n.low > high + 1 {
-                    high = n.low - 1;
-                }
-            }
+    let mut add = |out: &mut Level, c: IVec2, z: i32, offset: f32, normal: Vec3, colour: Vec3| {
+        let mut coord = IVec3::ZERO;
+        coord[axis] = z;
+        coord[u] = c.x;
+        coord[v] = c.y;
+        if existing.insert(coord, ()).is_some() {
+            return;
         }
-        for z in low..=high {
-            let mut coord = IVec3::ZERO;
-            coord[axis] = z;
-            coord[u] = c.x;
-            coord[v] = c.y;
-            if existing.insert(coord, ()).is_some() {
+        let mut o = Vec3::ZERO;
+        o[axis] = offset.clamp(-0.5, 0.5);
+        out.coords.push(coord);
+        out.offsets.push(o);
+        out.normals.push(if normal == Vec3::ZERO { unit(axis) } else { normal });
+        out.colours.push(colour);
+        out.mask.push(1.0);
+    };
+    for c in &filled {
+        let col = known[c];
+        let h = col.height.floor() as i32;
+        add(&mut out, *c, h, col.height - (h as f32 + 0.5), col.normal, col.colour);
+    }
+    // Steps: where two side-by-side columns' runs are more than a voxel
+    // apart along the axis, the sheet is cracked between them (seen from the
+    // side, the sky shows through). The lower column's run is raised to meet
+    // the higher one, as a steep slope of the exemplar is a run of voxels
+    // per column. Each pair is judged on the runs before any is raised, so
+    // the result does not depend on the order.
+    let mut keys: Vec<IVec2> = known.keys().copied().collect();
+    keys.sort_unstable_by_key(|c| (c.x, c.y));
+    let mut bridges: Vec<(IVec2, i32, i32, Vec3, Vec3)> = Vec::new();
+    for c in &keys {
+        let a = known[c];
+        for d in [IVec2::X, IVec2::Y] {
+            let Some(b) = known.get(&(*c + d)) else { continue };
+            let (low_col, high_col, from, to) = if b.low > a.high + 1 {
+                (*c, *c + d, a.high + 1, b.low - 1)
+            } else if a.low > b.high + 1 {
+                (*c + d, *c, b.high + 1, a.low - 1)
+            } else {
                 continue;
-            }
-            let mut offset = Vec3::ZERO;
-            if z == h {
-                offset[axis] = (col.height - (z as f32 + 0.5)).clamp(-0.5, 0.5);
-            }
-            out.coords.push(coord);
-            out.offsets.push(offset);
-            out.normals.push(if col.normal == Vec3::ZERO { unit(axis) } else { col.normal });
-            out.colours.push(col.colour);
-            out.mask.push(1.0);
-            added += 1;
+            };
+            // The step's face looks across, towards the lower column where
+            // the sheet faces up along the axis, away from it where it faces down.
+            let sheet = (a.normal + b.normal).normalize_or_zero();
+            let across_dir = (low_col - high_col).as_vec2();
+            let mut side = Vec3::ZERO;
+            side[u] = across_dir.x;
+            side[v] = across_dir.y;
+            let facing = if sheet[axis] >= 0.0 { side } else { -side };
+            bridges.push((low_col, from, to, (facing + sheet).normalize_or_zero(), (a.colour + b.colour) / 2.0));
         }
     }
+    for (c, from, to, normal, colour) in bridges {
+        for z in from..=to {
+            add(&mut out, c, z, 0.0, normal, colour);
+        }
+    }
+    let added = out.len() - level.len();
     (out, added)
 }
 
@@ -266,13 +288,13 @@ mod tests {
         let shares = single_run_shares(&whole);
         assert_eq!(height_axis(&shares), Some(1), "{shares:?}");
         assert_eq!(enclosed_counts(&whole)[1], 0);
-        assert_eq!(fill_axis(&whole), Some(1));
+        assert_eq!(mend_axis(&whole), Some(1));
         // A hole of 5 x 4 columns inside, and a bite out of the border (open
         // to the outside: not a hole through the sheet).
         let holed = sheet(40, |x, z| !((10..15).contains(&x) && (20..24).contains(&z)) && !(x < 3 && z < 3));
         let holes = enclosed_columns(&holed, 1);
         assert_eq!(holes.len(), 20, "{holes:?}");
-        let (mended, added) = fill_holes(&holed, 1);
+        let (mended, added) = mend_sheet(&holed, 1);
         assert!(added >= 20, "{added}");
         assert!(enclosed_columns(&mended, 1).is_empty());
         assert_eq!(mended.len(), holed.len() + added);
@@ -285,6 +307,40 @@ mod tests {
         }
         // The bite stays: the outline is the variant's own.
         assert!(!mended.coords.iter().any(|c| c.x < 3 && c.z < 3));
+    }
+
+    #[test]
+    fn a_crack_at_a_step_is_bridged_from_the_lower_side() {
+        // Two halves of a flat sheet, 5 voxels apart in height: seen from the
+        // side, the sky shows between them.
+        let mut l = Level { index: 2, resolution: 64, ..Default::default() };
+        for x in 0..10 {
+            for z in 0..6 {
+                l.coords.push(IVec3::new(x, if x < 5 { 10 } else { 15 }, z));
+                l.offsets.push(Vec3::ZERO);
+                l.normals.push(Vec3::Y);
+                l.colours.push(Vec3::splat(0.5));
+                l.mask.push(1.0);
+            }
+        }
+        assert!(enclosed_columns(&l, 1).is_empty());
+        let (mended, added) = mend_sheet(&l, 1);
+        // Columns x = 4 raised by 4 voxels (11..=14), 6 of them.
+        assert_eq!(added, 24);
+        for i in l.len()..mended.len() {
+            let c = mended.coords[i];
+            assert!(c.x == 4 && (11..=14).contains(&c.y), "{c}");
+            // The step's face looks across, towards the lower side (the sheet faces up).
+            assert!(mended.normals[i].x < -0.5 && mended.normals[i].y > 0.0, "{}", mended.normals[i]);
+        }
+        // One half alone has neither a step nor a hole: left as it is. And a
+        // mended sheet needs no second mending.
+        let mut half = l.clone();
+        half.retain(|i| i < 30);
+        assert_eq!(mend_sheet(&half, 1).1, 0);
+        assert_eq!(mend_sheet(&mended, 1).1, 0);
+        let (wavy, steps) = mend_sheet(&sheet(20, |_, _| true), 1);
+        assert!(steps > 0 && mend_sheet(&wavy, 1).1 == 0, "{steps}");
     }
 
     #[test]
@@ -311,6 +367,6 @@ mod tests {
         // Along its axis the inside of the ring is enclosed: a height field
         // there would call it a hole, which is why the exemplar must not have one.
         assert!(enclosed_counts(&l)[1] > 300);
-        assert!(fill_axis(&l).is_none());
+        assert!(mend_axis(&l).is_none());
     }
 }

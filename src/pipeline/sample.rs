@@ -276,11 +276,11 @@ pub fn sample_variants(
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
-        let fill_axes = if opts.fill_holes { sample::fill_axes(exemplar_levels) } else { Vec::new() };
+        let mend_axes = if opts.mend_sheets { sample::mend_axes(exemplar_levels) } else { Vec::new() };
         for (i, v) in variants.iter_mut().enumerate() {
             let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
             let seed = sample::variant_seed(opts.seed, opts.first + i);
-            let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, seed, &fill_axes)?;
+            let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, seed, &mend_axes)?;
             v.extend(finer);
         }
     }

@@ -403,8 +403,8 @@ pub fn transfer(
 /// Levels `coarse.index + 1 ..= last` of a variant by detail transfer from
 /// `exemplar_levels`, starting from its level `coarse`; each level's matches
 /// start from the voxels the previous transferred level copied. `seed`: the
-/// variant's seed. `fill_axes`: per level, the axis along which holes through
-/// the sheet are closed after the copy ([`crate::level::height_field::fill_holes`];
+/// variant's seed. `mend_axes`: per level, the axis along which holes through
+/// the sheet are closed after the copy ([`crate::level::height_field::mend_sheet`];
 /// empty: none are); the voxels added were copied from nowhere, so the next
 /// level's matches start at random there.
 pub fn extend(
@@ -413,7 +413,7 @@ pub fn extend(
     last: usize,
     cfg: &TransferConfig,
     seed: u64,
-    fill_axes: &[Option<usize>],
+    mend_axes: &[Option<usize>],
 ) -> Result<Vec<Level>, TransferError> {
     if last >= exemplar_levels.len() {
         return Err(TransferError::Invalid(format!(
@@ -435,10 +435,10 @@ pub fn extend(
             derive_seed(seed, l as u64, Stream::Transfer, 0),
         )?;
         let Transferred { mut level, sources: mut copied } = next;
-        if let Some(axis) = fill_axes.get(l).copied().flatten() {
-            let (filled, added) = crate::level::height_field::fill_holes(&level, axis);
+        if let Some(axis) = mend_axes.get(l).copied().flatten() {
+            let (filled, added) = crate::level::height_field::mend_sheet(&level, axis);
             if added > 0 {
-                log::debug!("transfer: level {l}: {added} voxels close holes through the sheet");
+                log::debug!("transfer: level {l}: {added} voxels mend the sheet (holes through it, cracks at steps)");
                 copied.resize(filled.len(), IVec3::splat(i32::MIN));
                 level = filled;
             }
