@@ -725,6 +725,19 @@ pub fn check_flags(rows: &[VariantScores]) -> Vec<CheckResult> {
             ok,
         });
     }
+    // On a sheet (a terrain), the torn rung's holes go through it.
+    if top.is_some_and(|t| t.sheet_axis.is_some()) {
+        if let Some(s) = rows.iter().find(|v| v.name == Torn.name()).and_then(|v| v.structure.as_ref()) {
+            out.push(CheckResult {
+                metric: format!("structure.hole_columns {}", s.hole_columns),
+                rung: Torn.name().into(),
+                exemplar: top.map_or(f64::NAN, |t| t.hole_columns as f64),
+                value: s.hole_columns as f64,
+                requirement: "flagged holed (the exemplar is a sheet)".into(),
+                ok: s.flags.contains(&Flag::Holed),
+            });
+        }
+    }
     out
 }
 

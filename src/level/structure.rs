@@ -479,6 +479,10 @@ pub struct StructureScores {
     /// through it (0 elsewhere).
     #[serde(default)]
     pub hole_columns: usize,
+    /// The axis along which the exemplar is a sheet (0 x, 1 y, 2 z), where
+    /// `hole_columns` are counted; none for other shapes.
+    #[serde(default)]
+    pub sheet_axis: Option<usize>,
     /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
     /// (1: the exemplar's surface, voxel for voxel).
     pub copy_fscore: f64,
@@ -517,7 +521,8 @@ impl StructureScores {
         } else {
             1.0
         };
-        let hole_columns = e.sheet_axis().map_or(0, |a| s.enclosed_columns[a]);
+        let sheet_axis = e.sheet_axis();
+        let hole_columns = sheet_axis.map_or(0, |a| s.enclosed_columns[a]);
         let hole_limit = p.max_hole_share * e.voxels as f64;
         let terms = [
             sym(mass_ratio),
@@ -574,6 +579,7 @@ impl StructureScores {
             seen_through_excess,
             thin_ratio,
             hole_columns,
+            sheet_axis,
             copy_fscore,
             largest_change,
             score: terms.iter().copied().fold(1.0, f64::min),
@@ -806,6 +812,26 @@ mod tests {
         assert!(gone >= above && gone < whole.len() / 4 && added == 0, "gone {gone}, added {added}, {above} above the cut");
         // The other way round the cap is added and nothing is gone.
         assert_eq!(Matching::of(&whole, &capless).gone_and_added(), (0, gone));
+    }
+
+    #[test]
+    fn a_hole_through_a_sheet_is_holed_and_a_closed_shell_has_no_sheet_axis() {
+        // A sphere's cap is a height field along y; a hole of 0.3 x 0.3 (about
+        // 10 x 10 columns at 64^3) punched through its top.
+        let cap = sphere(64, 0.7, |p| p.y > 0.3);
+        let c = Structure::of(&cap);
+        assert_eq!(c.sheet_axis(), Some(1), "{c:?}");
+        let holed = sphere(64, 0.7, |p| p.y > 0.3 && (p.x.abs() > 0.15 || p.z.abs() > 0.15));
+        let p = StructureParams::default();
+        let sc = StructureScores::new(&holed, &Structure::of(&holed), &cap, &c, &p);
+        assert_eq!(sc.sheet_axis, Some(1));
+        assert!(sc.hole_columns >= 50 && sc.flags.contains(&Flag::Holed) && !sc.whole(), "{sc:?}");
+        assert!(sc.score < 0.2, "{sc:?}");
+        let same = StructureScores::new(&cap, &c, &cap, &c, &p);
+        assert_eq!((same.hole_columns, same.whole()), (0, true));
+        // A closed sphere is no sheet: the flag does not apply.
+        let whole = sphere(64, 0.7, |_| true);
+        assert_eq!(Structure::of(&whole).sheet_axis(), None);
     }
 
     #[test]
