@@ -8,12 +8,14 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use shapeshifter::level::structure::{Matching, Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
+use shapeshifter::level::height_field;
+use shapeshifter::level::structure::{structure_level, Matching, Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
 
 /// Prints mass and extent ratios, pieces, free-boundary shares, enclosure and
 /// thin-part ratios, copy F-score, the exemplar's largest region the variant
 /// lacks and the voxels it has where the exemplar has none (`gone`, `added`:
-/// a part lost with nothing in its place is gone > 0, added 0),
+/// a part lost with nothing in its place is gone > 0, added 0), where the
+/// exemplar is a sheet its holes and cracks at steps (`holes`, `cracks`),
 /// score and flags per variant and level (16^3 .. 64^3).
 #[derive(Parser, Debug)]
 struct Args {
@@ -31,7 +33,10 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let (_, levels) = shapeshifter::io::dataset::read(&args.exemplar)?;
     let params = StructureParams::default();
-    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "score");
+    // Where the exemplar is a sheet (decided at 64^3, as sampling decides),
+    // its holes and cracks at steps at every level probed.
+    let sheet = structure_level(&levels).and_then(|l| Structure::of(l).sheet_axis());
+    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "holes", "cracks", "score");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for ex in levels.iter().filter(|l| l.resolution <= args.max_resolution) {
@@ -44,8 +49,12 @@ fn main() -> anyhow::Result<()> {
             let s = StructureScores::new(&v, &vs, ex, &es, &params);
             let (gone, added) = Matching::of(&v, ex).gone_and_added();
             if std::env::var("PROBE_RAW").is_ok() { eprintln!("raw enclosure {} vs {}", vs.enclosure, es.enclosure); }
+            let (holes, cracks) = match sheet {
+                Some(a) => (height_field::enclosed_columns(&v, a).len().to_string(), height_field::step_cracks(&v, a).to_string()),
+                None => ("-".into(), "-".into()),
+            };
             println!(
-                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6.3}  {}",
+                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6} {:>6} {:>6.3}  {}",
                 ex.resolution,
                 s.mass_ratio,
                 s.extent_ratio,
@@ -58,6 +67,8 @@ fn main() -> anyhow::Result<()> {
                 s.copy_fscore,
                 gone,
                 added,
+                holes,
+                cracks,
                 s.score,
                 s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")
             );

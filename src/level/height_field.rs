@@ -108,6 +108,36 @@ pub fn enclosed_columns(level: &Level, axis: usize) -> Vec<IVec2> {
     out
 }
 
+/// Where two side-by-side columns' runs (lowest, highest voxel along the
+/// axis) are more than a voxel apart: whether the first is the lower, and
+/// the voxels between them (from, to, inclusive).
+fn step_gap(a: (i32, i32), b: (i32, i32)) -> Option<(bool, i32, i32)> {
+    if b.0 > a.1 + 1 {
+        Some((true, a.1 + 1, b.0 - 1))
+    } else if a.0 > b.1 + 1 {
+        Some((false, b.1 + 1, a.0 - 1))
+    } else {
+        None
+    }
+}
+
+/// Cracks at steps along `axis`: pairs of side-by-side (4-neighbour)
+/// occupied columns whose runs are more than a voxel apart, so that the
+/// sheet is open between them seen from the side. 0 on the exemplar's
+/// levels (a surface voxelised is 26-connected).
+pub fn step_cracks(level: &Level, axis: usize) -> usize {
+    let runs: VoxelMap2<(i32, i32)> = columns(level, axis)
+        .into_iter()
+        .map(|(c, rows)| {
+            let h = rows.iter().map(|&i| level.coords[i][axis]);
+            (c, (h.clone().min().unwrap_or(0), h.max().unwrap_or(0)))
+        })
+        .collect();
+    runs.iter()
+        .map(|(c, &a)| [IVec2::X, IVec2::Y].iter().filter(|&&d| runs.get(&(*c + d)).is_some_and(|&b| step_gap(a, b).is_some())).count())
+        .sum()
+}
+
 /// Per axis, [`enclosed_columns`]' count.
 pub fn enclosed_counts(level: &Level) -> [usize; 3] {
     [0, 1, 2].map(|axis| enclosed_columns(level, axis).len())
@@ -224,13 +254,8 @@ pub fn mend_sheet(level: &Level, axis: usize) -> (Level, usize) {
         let a = known[c];
         for d in [IVec2::X, IVec2::Y] {
             let Some(b) = known.get(&(*c + d)) else { continue };
-            let (low_col, high_col, from, to) = if b.low > a.high + 1 {
-                (*c, *c + d, a.high + 1, b.low - 1)
-            } else if a.low > b.high + 1 {
-                (*c + d, *c, b.high + 1, a.low - 1)
-            } else {
-                continue;
-            };
+            let Some((a_lower, from, to)) = step_gap((a.low, a.high), (b.low, b.high)) else { continue };
+            let (low_col, high_col) = if a_lower { (*c, *c + d) } else { (*c + d, *c) };
             // The step's face looks across, towards the lower column where
             // the sheet faces up along the axis, away from it where it faces down.
             let sheet = (a.normal + b.normal).normalize_or_zero();
@@ -339,6 +364,7 @@ mod tests {
         half.retain(|i| i < 30);
         assert_eq!(mend_sheet(&half, 1).1, 0);
         assert_eq!(mend_sheet(&mended, 1).1, 0);
+        assert_eq!((step_cracks(&l, 1), step_cracks(&mended, 1)), (6, 0));
         let (wavy, steps) = mend_sheet(&sheet(20, |_, _| true), 1);
         assert!(steps > 0 && mend_sheet(&wavy, 1).1 == 0, "{steps}");
     }
