@@ -291,8 +291,16 @@ pub fn sample(
         }
     }
     let box0 = level0_box(exemplar0, opts.extent)?;
-    let exemplar0_structure = Structure::of(exemplar0);
+    let mut exemplar0_structure = Structure::of(exemplar0);
     let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
+    // Whether the exemplar is a sheet (the `holed` term) is decided at the
+    // structure level, as for mending ([`mend_axes`]): at 16^3 a tower's walls
+    // are single runs of voxels too.
+    if let Some((_, s)) = &reference {
+        if s.sheet_axis().is_none() {
+            exemplar0_structure.single_run = [0.0; 3];
+        }
+    }
     // Also when sampling stops at level 0 (see `Models::upsamplers`).
     let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
     let mend_axes = if opts.mend_sheets { mend_axes(exemplar_levels) } else { Vec::new() };
