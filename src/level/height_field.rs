@@ -143,9 +143,11 @@ pub fn enclosed_counts(level: &Level) -> [usize; 3] {
     [0, 1, 2].map(|axis| enclosed_columns(level, axis).len())
 }
 
-/// The axis along which a variant's level `l` may be mended by [`mend_sheet`]:
-/// the exemplar's level `l` is a height field along it and has no hole
-/// through it (so a terrain with an arch of its own is left as it is).
+/// The axis along which an exemplar's level is a sheet: a height field along
+/// it with no hole through it (a terrain with an arch of its own is not one).
+/// Sampling decides at the exemplar's structure level (64^3) and mends a
+/// variant's level `l` along that axis where the exemplar's level `l` has no
+/// hole either ([`crate::learn::sample::mend_axes`]).
 pub fn mend_axis(exemplar_level: &Level) -> Option<usize> {
     let axis = height_axis(&single_run_shares(exemplar_level))?;
     enclosed_columns(exemplar_level, axis).is_empty().then_some(axis)
