@@ -337,6 +337,29 @@ mod tests {
     }
 
     #[test]
+    fn a_cliff_face_is_a_sheet_along_its_own_axis() {
+        // The holed sheet turned on its side (its height along x): a cliff.
+        let swap = |v: Vec3| Vec3::new(v.y, v.x, v.z);
+        let mut cliff = sheet(40, |x, z| !((10..15).contains(&x) && (20..24).contains(&z)));
+        for i in 0..cliff.len() {
+            let c = cliff.coords[i];
+            cliff.coords[i] = IVec3::new(c.y, c.x, c.z);
+            cliff.offsets[i] = swap(cliff.offsets[i]);
+            cliff.normals[i] = swap(cliff.normals[i]);
+        }
+        assert_eq!(height_axis(&single_run_shares(&cliff)), Some(0));
+        assert_eq!(enclosed_columns(&cliff, 0).len(), 20);
+        let (mended, _) = mend_sheet(&cliff, 0);
+        assert!(enclosed_columns(&mended, 0).is_empty() && step_cracks(&mended, 0) == 0);
+        // Filled along x: each of the hole's columns (y, z) holds surface now.
+        for y in 10..15 {
+            for z in 20..24 {
+                assert!(mended.coords.iter().any(|c| c.y == y && c.z == z), "column {y}, {z}");
+            }
+        }
+    }
+
+    #[test]
     fn a_crack_at_a_step_is_bridged_from_the_lower_side() {
         // Two halves of a flat sheet, 5 voxels apart in height: seen from the
         // side, the sky shows between them.
