@@ -35,7 +35,7 @@ fn main() -> anyhow::Result<()> {
     let params = StructureParams::default();
     // Where the exemplar is a sheet (decided at 64^3, as sampling decides),
     // its holes and cracks at steps at every level probed.
-    let sheet = structure_level(&levels).and_then(|l| Structure::of(l).sheet_axis());
+    let sheet = structure_level(&levels).and_then(height_field::sheet_axis);
     println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "holes", "cracks", "score");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();

@@ -291,19 +291,15 @@ pub fn sample(
         }
     }
     let box0 = level0_box(exemplar0, opts.extent)?;
+    let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
     let mut exemplar0_structure = Structure::of(exemplar0);
+    // Whether level 0 is a sheet (the `holed` term of the level-0 choice) is
+    // the structure level's decision, not 16^3's own.
+    exemplar0_structure.sheet_axis = sheet_axes[0];
     let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
-    // Whether the exemplar is a sheet (the `holed` term) is decided at the
-    // structure level, as for mending ([`mend_axes`]): at 16^3 a tower's walls
-    // are single runs of voxels too.
-    if let Some((_, s)) = &reference {
-        if s.sheet_axis().is_none() {
-            exemplar0_structure.single_run = [0.0; 3];
-        }
-    }
     // Also when sampling stops at level 0 (see `Models::upsamplers`).
     let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
-    let mend_axes = if opts.mend_sheets { mend_axes(exemplar_levels) } else { Vec::new() };
+    let mend_axes = if opts.mend_sheets { sheet_axes } else { Vec::new() };
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
@@ -324,22 +320,6 @@ pub fn sample(
             })
             .collect()
     })
-}
-
-/// Per exemplar level, the axis along which a variant's same level has its
-/// holes through the sheet closed (`sample.mend_sheets`). Whether the exemplar
-/// is a sheet is decided once, at its structure level (64^3), where walls are
-/// walls: at 16^3 a tower's wall is one run of voxels per column as a
-/// terrain's slope is (0.93 of the ruined tower's columns along its height, against 0.28 at
-/// 64^3). A level is mended only where the exemplar's same level has no hole
-/// along that axis.
-pub fn mend_axes(exemplar_levels: &[Level]) -> Vec<Option<usize>> {
-    use crate::level::height_field::{enclosed_columns, mend_axis};
-    let axis = crate::level::structure::structure_level(exemplar_levels).and_then(mend_axis);
-    exemplar_levels
-        .iter()
-        .map(|l| axis.filter(|&a| enclosed_columns(l, a).is_empty()))
-        .collect()
 }
 
 /// The seed of variant `index` of a run with seed `run_seed`: variants are
@@ -373,8 +353,8 @@ struct OneVariant<'a> {
     /// The exemplar's level 1 and its thin-part voxel count: a level-0
     /// candidate's thin parts are counted a level finer ([`ThinAtLevel1`]).
     exemplar1: Option<ThinAtLevel1<'a>>,
-    /// Per level, the axis along which its holes are closed
-    /// ([`crate::level::height_field::mend_axis`]; empty: none are).
+    /// Per level, the axis along which it is mended
+    /// ([`crate::level::height_field::sheet_axes`]; empty: none is).
     mend_axes: &'a [Option<usize>],
 }
 

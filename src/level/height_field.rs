@@ -143,14 +143,23 @@ pub fn enclosed_counts(level: &Level) -> [usize; 3] {
     [0, 1, 2].map(|axis| enclosed_columns(level, axis).len())
 }
 
-/// The axis along which an exemplar's level is a sheet: a height field along
-/// it with no hole through it (a terrain with an arch of its own is not one).
-/// Sampling decides at the exemplar's structure level (64^3) and mends a
-/// variant's level `l` along that axis where the exemplar's level `l` has no
-/// hole either ([`crate::learn::sample::mend_axes`]).
-pub fn mend_axis(exemplar_level: &Level) -> Option<usize> {
-    let axis = height_axis(&single_run_shares(exemplar_level))?;
-    enclosed_columns(exemplar_level, axis).is_empty().then_some(axis)
+/// The axis along which `level` is a sheet: a height field along it with no
+/// hole through it (a terrain with an arch of its own is not one).
+pub fn sheet_axis(level: &Level) -> Option<usize> {
+    let axis = height_axis(&single_run_shares(level))?;
+    enclosed_columns(level, axis).is_empty().then_some(axis)
+}
+
+/// Per exemplar level, the axis along which it is a sheet, decided once at
+/// the structure level (64^3), where walls are walls: at 16^3 a tower's wall
+/// is one run of voxels per column as a terrain's slope is (0.93 of the
+/// ruined tower's columns along its height, against 0.28 at 64^3), and a flat
+/// airplane is a sheet. A level counts where it has no hole along that axis.
+/// Where a variant's holes are counted (`holed`, also at level 0) and,
+/// with `sample.mend_sheets`, along which its levels are mended.
+pub fn sheet_axes(exemplar_levels: &[Level]) -> Vec<Option<usize>> {
+    let axis = super::structure::structure_level(exemplar_levels).and_then(sheet_axis);
+    exemplar_levels.iter().map(|l| axis.filter(|&a| enclosed_columns(l, a).is_empty())).collect()
 }
 
 /// `level` mended as a sheet along `axis`: every hole through it closed and
@@ -315,7 +324,7 @@ mod tests {
         let shares = single_run_shares(&whole);
         assert_eq!(height_axis(&shares), Some(1), "{shares:?}");
         assert_eq!(enclosed_counts(&whole)[1], 0);
-        assert_eq!(mend_axis(&whole), Some(1));
+        assert_eq!(sheet_axis(&whole), Some(1));
         // A hole of 5 x 4 columns inside, and a bite out of the border (open
         // to the outside: not a hole through the sheet).
         let holed = sheet(40, |x, z| !((10..15).contains(&x) && (20..24).contains(&z)) && !(x < 3 && z < 3));
@@ -418,6 +427,6 @@ mod tests {
         // Along its axis the inside of the ring is enclosed: a height field
         // there would call it a hole, which is why the exemplar must not have one.
         assert!(enclosed_counts(&l)[1] > 300);
-        assert!(mend_axis(&l).is_none());
+        assert!(sheet_axis(&l).is_none());
     }
 }

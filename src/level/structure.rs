@@ -56,14 +56,17 @@ pub struct Structure {
     /// wall, a fin).
     #[serde(default)]
     pub thin: usize,
-    /// Per axis, the share of occupied columns that hold one unbroken run of
-    /// voxels, and the empty columns the occupied ones enclose
-    /// ([`super::height_field`]: a height field along an axis, and the holes
-    /// through it).
-    #[serde(default)]
-    pub single_run: [f64; 3],
+    /// Per axis, the empty columns the occupied ones enclose (holes through
+    /// the shape along it, [`super::height_field::enclosed_columns`]).
     #[serde(default)]
     pub enclosed_columns: [usize; 3],
+    /// The axis along which this shape is a sheet, a height field without a
+    /// hole ([`super::height_field::sheet_axis`]); where a variant's holes
+    /// are counted when this is the exemplar's. Sampling sets an exemplar's
+    /// level 0 to the decision of its structure level
+    /// ([`super::height_field::sheet_axes`]).
+    #[serde(default)]
+    pub sheet_axis: Option<usize>,
 }
 
 impl Structure {
@@ -84,15 +87,9 @@ impl Structure {
             enclosure: enclosure(&coords),
             seen_through: super::seen_through::seen_through(level),
             thin: thin_count(level),
-            single_run: super::height_field::single_run_shares(level),
             enclosed_columns: super::height_field::enclosed_counts(level),
+            sheet_axis: super::height_field::sheet_axis(level),
         }
-    }
-
-    /// The axis along which this shape (an exemplar's level) is a height
-    /// field without a hole through it: where a variant's holes are counted.
-    pub fn sheet_axis(&self) -> Option<usize> {
-        super::height_field::height_axis(&self.single_run).filter(|&a| self.enclosed_columns[a] == 0)
     }
 
     /// Components holding at least [`PIECE_SHARE`] of the voxels.
@@ -364,7 +361,7 @@ pub struct StructureParams {
     /// of its surface voxels on thin parts (a sphere has none to lose).
     pub min_exemplar_thin_share: f64,
     /// Where the exemplar is a height field without a hole (a terrain, a
-    /// cliff; [`Structure::sheet_axis`]), more columns with no surface
+    /// cliff; `Structure::sheet_axis`), more columns with no surface
     /// inside the footprint than this share of the exemplar's surface voxels:
     /// holed. 0.001, measured (docs/results.md, "Holes through a sheet"):
     /// 3 columns at 64^3 on the terrain of ../shared/data, where its
@@ -474,7 +471,7 @@ pub struct StructureScores {
     /// a voxel or two.
     #[serde(default = "crate::config::one_f64")]
     pub thin_ratio: f64,
-    /// Where the exemplar is a sheet ([`Structure::sheet_axis`]), the columns
+    /// Where the exemplar is a sheet (`Structure::sheet_axis`), the columns
     /// inside the variant's footprint with no surface along that axis: holes
     /// through it (0 elsewhere).
     #[serde(default)]
@@ -521,7 +518,7 @@ impl StructureScores {
         } else {
             1.0
         };
-        let sheet_axis = e.sheet_axis();
+        let sheet_axis = e.sheet_axis;
         let hole_columns = sheet_axis.map_or(0, |a| s.enclosed_columns[a]);
         let hole_limit = p.max_hole_share * e.voxels as f64;
         let terms = [
@@ -820,7 +817,7 @@ mod tests {
         // 10 x 10 columns at 64^3) punched through its top.
         let cap = sphere(64, 0.7, |p| p.y > 0.3);
         let c = Structure::of(&cap);
-        assert_eq!(c.sheet_axis(), Some(1), "{c:?}");
+        assert_eq!(c.sheet_axis, Some(1), "{c:?}");
         let holed = sphere(64, 0.7, |p| p.y > 0.3 && (p.x.abs() > 0.15 || p.z.abs() > 0.15));
         let p = StructureParams::default();
         let sc = StructureScores::new(&holed, &Structure::of(&holed), &cap, &c, &p);
@@ -831,7 +828,7 @@ mod tests {
         assert_eq!((same.hole_columns, same.whole()), (0, true));
         // A closed sphere is no sheet: the flag does not apply.
         let whole = sphere(64, 0.7, |_| true);
-        assert_eq!(Structure::of(&whole).sheet_axis(), None);
+        assert_eq!(Structure::of(&whole).sheet_axis, None);
     }
 
     #[test]

@@ -276,7 +276,7 @@ pub fn sample_variants(
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
-        let mend_axes = if opts.mend_sheets { sample::mend_axes(exemplar_levels) } else { Vec::new() };
+        let mend_axes = if opts.mend_sheets { crate::level::height_field::sheet_axes(exemplar_levels) } else { Vec::new() };
         for (i, v) in variants.iter_mut().enumerate() {
             let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
             let seed = sample::variant_seed(opts.seed, opts.first + i);

@@ -165,14 +165,14 @@ fn the_thread_count_does_not_change_the_result() {
 /// the levels are mended as they are made.
 #[test]
 fn holes_through_a_sheet_are_closed_level_by_level_where_asked() {
-    use crate::level::height_field::{enclosed_columns, mend_axis};
+    use crate::level::height_field::{enclosed_columns, sheet_axis};
     let cap = |l: &mut Level| {
         let ys: Vec<f64> = (0..l.len()).map(|i| l.point_normalised(i).y).collect();
         l.retain(|i| ys[i] > 0.25);
     };
     let mut levels = sphere_levels(&[16, 32, 64], DVec3::ZERO, 0.6);
     levels.iter_mut().for_each(cap);
-    let axes: Vec<Option<usize>> = levels.iter().map(mend_axis).collect();
+    let axes: Vec<Option<usize>> = levels.iter().map(sheet_axis).collect();
     assert_eq!(axes, vec![Some(1); 3]);
     let mut holed = levels[0].clone();
     let ps: Vec<DVec3> = (0..holed.len()).map(|i| holed.point_normalised(i)).collect();
