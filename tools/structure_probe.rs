@@ -15,7 +15,8 @@ use shapeshifter::level::structure::{structure_level, Matching, Structure, Struc
 /// thin-part ratios, copy F-score, the exemplar's largest region the variant
 /// lacks and the voxels it has where the exemplar has none (`gone`, `added`:
 /// a part lost with nothing in its place is gone > 0, added 0), where the
-/// exemplar is a sheet its holes and cracks at steps (`holes`, `cracks`),
+/// exemplar is a sheet its holes and cracks at steps (`holes`, `cracks`;
+/// the exemplar's single-run shares per level and its sheet axis first),
 /// score and flags per variant and level (16^3 .. 64^3).
 #[derive(Parser, Debug)]
 struct Args {
@@ -36,6 +37,13 @@ fn main() -> anyhow::Result<()> {
     // Where the exemplar is a sheet (decided at 64^3, as sampling decides),
     // its holes and cracks at steps at every level probed.
     let sheet = structure_level(&levels).and_then(height_field::sheet_axis);
+    // The exemplar's single-run shares per level (x, y, z): a sheet is 0.95 or
+    // more along one axis at its structure level.
+    for l in levels.iter().filter(|l| l.resolution <= args.max_resolution) {
+        let [x, y, z] = height_field::single_run_shares(l);
+        println!("exemplar {:>4}^3: columns of one run along x {x:.2}, y {y:.2}, z {z:.2}", l.resolution);
+    }
+    println!("exemplar sheet axis (decided at the structure level): {}", sheet.map_or("none".into(), |a| ["x", "y", "z"][a].to_string()));
     println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "holes", "cracks", "score");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
