@@ -344,6 +344,12 @@ pub struct SampleConfig {
     /// Not written when off.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub mend_sheets: bool,
+    /// Every level sampled or transferred loses its specks, pieces smaller
+    /// than 0.5% of its voxels and than every piece of the exemplar's level
+    /// (`level::repair`), before the next level is made: the detail
+    /// transfer's loose flecks. Not written when off.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub remove_specks: bool,
 }
 
 /// Which level-0 candidate a variant keeps (`sample.level0_pick`).
@@ -458,7 +464,7 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 9] = [
+        let defaults: [(&str, &str, toml::Value); 10] = [
             ("sample", "final_step", toml::Value::String("prediction".into())),
             ("sample", "level0_pick", toml::Value::String("first".into())),
             ("sample", "level0_sampler", toml::Value::String("same".into())),
@@ -467,6 +473,7 @@ impl Config {
             ("sample", "attempts", toml::Value::Integer(1)),
             ("sample", "reject_copies", toml::Value::Boolean(false)),
             ("sample", "mend_sheets", toml::Value::Boolean(false)),
+            ("sample", "remove_specks", toml::Value::Boolean(false)),
             ("train", "bf16", toml::Value::Boolean(false)),
         ];
         for (section, key, value) in defaults {
@@ -784,6 +791,7 @@ mod tests {
             "sample.attempts=1",
             "sample.reject_copies=false",
             "sample.mend_sheets=false",
+            "sample.remove_specks=false",
             "sample.level0_pick=first",
             "sample.level0_sampler=same",
             "sample.level0_steps=50",

@@ -50,6 +50,7 @@ use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Sc
 use crate::level::structure::{thin_count, Flag, Structure, StructureParams, StructureScores};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
+use crate::level::repair::LevelRepair;
 use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
@@ -189,6 +190,8 @@ pub struct SampleOptions {
     /// Whether holes through a sheet are closed level by level, where the
     /// exemplar is one (`sample.mend_sheets`).
     pub mend_sheets: bool,
+    /// Whether every level loses its specks (`sample.remove_specks`).
+    pub remove_specks: bool,
 }
 
 impl SampleOptions {
@@ -212,6 +215,7 @@ impl SampleOptions {
             attempts: config.sample.attempts,
             reject_copies: config.sample.reject_copies,
             mend_sheets: config.sample.mend_sheets,
+            remove_specks: config.sample.remove_specks,
         }
     }
 }
@@ -299,7 +303,7 @@ pub fn sample(
     let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
     // Also when sampling stops at level 0 (see `Models::upsamplers`).
     let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
-    let mend_axes = if opts.mend_sheets { sheet_axes } else { Vec::new() };
+    let repairs = crate::level::repair::repairs(exemplar_levels, opts.remove_specks, opts.mend_sheets);
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
@@ -314,7 +318,7 @@ pub fn sample(
                     exemplar0: (exemplar0, &exemplar0_structure),
                     structure_reference: reference.as_ref().map(|(l, s)| (*l, s)),
                     exemplar1,
-                    mend_axes: &mend_axes,
+                    repairs: &repairs,
                 };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
@@ -353,9 +357,9 @@ struct OneVariant<'a> {
     /// The exemplar's level 1 and its thin-part voxel count: a level-0
     /// candidate's thin parts are counted a level finer ([`ThinAtLevel1`]).
     exemplar1: Option<ThinAtLevel1<'a>>,
-    /// Per level, the axis along which it is mended
-    /// ([`crate::level::height_field::sheet_axes`]; empty: none is).
-    mend_axes: &'a [Option<usize>],
+    /// Per level, what it gets once made ([`crate::level::repair::repairs`];
+    /// empty: nothing).
+    repairs: &'a [LevelRepair],
 }
 
 /// The thin-part check of a level-0 candidate one level finer. At 16^3 a
@@ -753,7 +757,7 @@ impl OneVariant<'_> {
         let (cur, first) = match from {
             None => {
                 let (pruned, level) = self.chosen_level0(level0_seed, resolution0, opts)?;
-                let (pruned, level) = self.mended(pruned, level)?;
+                let (pruned, level) = self.repaired(pruned, level)?;
                 out.push(level);
                 (pruned, 1)
             }
@@ -790,25 +794,21 @@ impl OneVariant<'_> {
             let x = self.reverse(l, x, opts.upper_t_max, opts.upper_steps, seed, opts.final_step, self.sampler)?;
             let pruned = x.prune_by_mask()?;
             let level = pruned.to_level(l, self.frame)?;
-            let (pruned, level) = self.mended(pruned, level)?;
+            let (pruned, level) = self.repaired(pruned, level)?;
             cur = pruned;
             out.push(level);
         }
         Ok(cur)
     }
 
-    /// `level` (and its pruned tensor `pruned`) with its holes through the
-    /// sheet closed where the exemplar is a sheet at this level
-    /// (`sample.mend_sheets`); else as it is.
-    fn mended(&self, pruned: SparseTensor, level: Level) -> Result<(SparseTensor, Level)> {
-        let Some(axis) = self.mend_axes.get(level.index).copied().flatten() else { return Ok((pruned, level)) };
-        let (filled, added) = crate::level::height_field::mend_sheet(&level, axis);
-        if added == 0 {
-            return Ok((pruned, level));
-        }
-        log::debug!("level {}: {added} voxels mend the sheet (holes through it, cracks at steps)", level.index);
+    /// `level` (and its pruned tensor `pruned`) repaired as the exemplar's
+    /// level of its index says (specks removed, a sheet mended); else as it is.
+    fn repaired(&self, pruned: SparseTensor, level: Level) -> Result<(SparseTensor, Level)> {
+        let Some(repair) = self.repairs.get(level.index) else { return Ok((pruned, level)) };
+        let Some(r) = repair.apply(&level) else { return Ok((pruned, level)) };
+        log::debug!("level {}: {} speck voxels removed, {} voxels mend the sheet", level.index, r.removed(level.len()), r.added);
         // Back through the tensor, so the level's rows are in the grid's order as ever.
-        let pruned = SparseTensor::from_level(&filled, self.models.device)?.prune_by_mask()?;
+        let pruned = SparseTensor::from_level(&r.level, self.models.device)?.prune_by_mask()?;
         let level = pruned.to_level(level.index, self.frame)?;
         Ok((pruned, level))
     }

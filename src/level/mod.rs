@@ -7,6 +7,7 @@
 pub mod edit;
 pub mod files;
 pub mod height_field;
+pub mod repair;
 pub mod seen_through;
 pub mod structure;
 

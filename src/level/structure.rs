@@ -160,23 +160,32 @@ pub fn thin_count(level: &Level) -> usize {
 
 /// Sizes of the 26-connected components of a voxel set, largest first.
 pub fn components(coords: &[IVec3]) -> Vec<usize> {
+    let (_, mut sizes) = component_labels(coords);
+    sizes.sort_unstable_by(|a, b| b.cmp(a));
+    sizes
+}
+
+/// The 26-connected components of a voxel set: per voxel, its component's
+/// index, and per component its size (in the order first met).
+pub fn component_labels(coords: &[IVec3]) -> (Vec<usize>, Vec<usize>) {
     let index: VoxelMap<usize> = coords.iter().enumerate().map(|(i, &c)| (c, i)).collect();
-    let mut seen = vec![false; coords.len()];
+    let mut label = vec![usize::MAX; coords.len()];
     let mut sizes = Vec::new();
     let mut stack = Vec::new();
     for start in 0..coords.len() {
-        if seen[start] {
+        if label[start] != usize::MAX {
             continue;
         }
-        seen[start] = true;
+        let id = sizes.len();
+        label[start] = id;
         stack.push(start);
         let mut size = 0;
         while let Some(i) = stack.pop() {
             size += 1;
             for d in NEIGHBOURS_26 {
                 if let Some(&j) = index.get(coords[i] + d) {
-                    if !seen[j] {
-                        seen[j] = true;
+                    if label[j] == usize::MAX {
+                        label[j] = id;
                         stack.push(j);
                     }
                 }
@@ -184,8 +193,7 @@ pub fn components(coords: &[IVec3]) -> Vec<usize> {
         }
         sizes.push(size);
     }
-    sizes.sort_unstable_by(|a, b| b.cmp(a));
-    sizes
+    (label, sizes)
 }
 
 const NEIGHBOURS_26: [IVec3; 26] = {

@@ -276,11 +276,11 @@ pub fn sample_variants(
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
-        let mend_axes = if opts.mend_sheets { crate::level::height_field::sheet_axes(exemplar_levels) } else { Vec::new() };
+        let repairs = crate::level::repair::repairs(exemplar_levels, opts.remove_specks, opts.mend_sheets);
         for (i, v) in variants.iter_mut().enumerate() {
             let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
             let seed = sample::variant_seed(opts.seed, opts.first + i);
-            let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, seed, &mend_axes)?;
+            let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, seed, &repairs)?;
             v.extend(finer);
         }
     }

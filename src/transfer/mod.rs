@@ -403,17 +403,17 @@ pub fn transfer(
 /// Levels `coarse.index + 1 ..= last` of a variant by detail transfer from
 /// `exemplar_levels`, starting from its level `coarse`; each level's matches
 /// start from the voxels the previous transferred level copied. `seed`: the
-/// variant's seed. `mend_axes`: per level, the axis along which holes through
-/// the sheet are closed after the copy ([`crate::level::height_field::mend_sheet`];
-/// empty: none are); the voxels added were copied from nowhere, so the next
-/// level's matches start at random there.
+/// variant's seed. `repairs`: per level, what it gets after the copy
+/// ([`crate::level::repair::repairs`]: specks removed, a sheet mended;
+/// empty: nothing); the voxels a mend adds were copied from nowhere, so the
+/// next level's matches start at random there.
 pub fn extend(
     exemplar_levels: &[Level],
     coarse: &Level,
     last: usize,
     cfg: &TransferConfig,
     seed: u64,
-    mend_axes: &[Option<usize>],
+    repairs: &[crate::level::repair::LevelRepair],
 ) -> Result<Vec<Level>, TransferError> {
     if last >= exemplar_levels.len() {
         return Err(TransferError::Invalid(format!(
@@ -435,13 +435,11 @@ pub fn extend(
             derive_seed(seed, l as u64, Stream::Transfer, 0),
         )?;
         let Transferred { mut level, sources: mut copied } = next;
-        if let Some(axis) = mend_axes.get(l).copied().flatten() {
-            let (filled, added) = crate::level::height_field::mend_sheet(&level, axis);
-            if added > 0 {
-                log::debug!("transfer: level {l}: {added} voxels mend the sheet (holes through it, cracks at steps)");
-                copied.resize(filled.len(), IVec3::splat(i32::MIN));
-                level = filled;
-            }
+        if let Some(r) = repairs.get(l).and_then(|repair| repair.apply(&level)) {
+            log::debug!("transfer: level {l}: {} speck voxels removed, {} voxels mend the sheet", r.removed(level.len()), r.added);
+            copied = r.kept.iter().map(|&i| copied[i]).collect();
+            copied.resize(r.level.len(), IVec3::splat(i32::MIN));
+            level = r.level;
         }
         log::info!("transfer: level {l} ({}^3, {} voxels) in {:.2} s", level.resolution, level.len(), t.elapsed().as_secs_f64());
         sources = Some(copied);

@@ -1,4 +1,5 @@
-use glam::{DVec3, IVec3};
+use glam::{DVec3, IVec3, Vec3};
+use crate::level::repair::LevelRepair;
 
 use super::*;
 use crate::testing::synthetic::sphere_levels;
@@ -180,9 +181,36 @@ fn holes_through_a_sheet_are_closed_level_by_level_where_asked() {
     assert!(!enclosed_columns(&holed, 1).is_empty());
     let plain = extend(&levels, &holed, 2, &on(), 3, &[]).unwrap();
     assert!(plain.iter().all(|l| !enclosed_columns(l, 1).is_empty()));
-    let mended = extend(&levels, &holed, 2, &on(), 3, &axes).unwrap();
+    let repairs: Vec<LevelRepair> = axes.iter().map(|&sheet_axis| LevelRepair { sheet_axis, ..Default::default() }).collect();
+    let mended = extend(&levels, &holed, 2, &on(), 3, &repairs).unwrap();
     for l in &mended {
         assert!(enclosed_columns(l, 1).is_empty(), "level {}", l.index);
+        l.check().unwrap();
+    }
+}
+
+/// A loose voxel beside a sphere's coarse level is copied into a loose
+/// piece at every finer level, unless specks are removed as the levels are
+/// made; the sources stay row for row with the voxels kept.
+#[test]
+fn specks_are_removed_level_by_level_where_asked() {
+    use crate::level::repair::repairs;
+    use crate::level::structure::components;
+    let levels = sphere_levels(&[16, 32, 64], DVec3::ZERO, 0.5);
+    let mut coarse = levels[0].clone();
+    let far = coarse.coords.iter().copied().max_by_key(|c| c.x).unwrap() + IVec3::new(2, 0, 0);
+    coarse.coords.push(far);
+    coarse.offsets.push(Vec3::ZERO);
+    coarse.normals.push(Vec3::X);
+    coarse.colours.push(Vec3::splat(0.5));
+    coarse.mask.push(1.0);
+    let pieces = |l: &Level| components(&l.coords).len();
+    assert_eq!(pieces(&coarse), 2);
+    let plain = extend(&levels, &coarse, 2, &on(), 3, &[]).unwrap();
+    assert!(plain.iter().any(|l| pieces(l) > 1), "the loose voxel was copied nowhere: nothing to remove");
+    let clean = extend(&levels, &coarse, 2, &on(), 3, &repairs(&levels, true, false)).unwrap();
+    for l in &clean {
+        assert_eq!(pieces(l), 1, "level {}", l.index);
         l.check().unwrap();
     }
 }
