@@ -9,8 +9,8 @@ use super::Level;
 
 /// A speck is a piece smaller than this share of the level's surface voxels
 /// (and smaller than every piece of the exemplar's own level). The detail
-/// transfer leaves 20-70 such pieces at 256^3 on the ruined tower, up to
-/// 176 voxels each (0.1% of the level; 0.15-0.6% of its voxels in all),
+/// transfer leaves 22-67 such pieces at 256^3 on the ruined tower, up to
+/// 138 voxels each (0.1% of the level; 0.14-0.64% of its voxels in all),
 /// where the exemplar is one piece; the networks' levels have none but
 /// single voxels. 0.5% keeps every piece the structure flags count
 /// ([`super::structure::PIECE_SHARE`], 5%) and every part the networks make.
