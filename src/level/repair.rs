@@ -93,9 +93,10 @@ impl LevelRepair {
         if let Some(smallest) = self.exemplar_smallest_piece {
             let k = without_specks(level, smallest);
             if k.len() < level.len() {
+                let mut keep = vec![false; level.len()];
+                k.iter().for_each(|&i| keep[i] = true);
                 let mut l = level.clone();
-                let keep: std::collections::HashSet<usize> = k.iter().copied().collect();
-                l.retain(|i| keep.contains(&i));
+                l.retain(|i| keep[i]);
                 kept = k;
                 out = Some(l);
             }
