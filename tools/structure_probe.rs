@@ -11,7 +11,9 @@ use clap::Parser;
 use shapeshifter::level::height_field;
 use shapeshifter::level::structure::{structure_level, Matching, Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
 
-/// Prints mass and extent ratios, pieces, free-boundary shares, enclosure and
+/// Prints mass and extent ratios, pieces, loose pieces (`loose`: how many
+/// pieces are under the flags' piece share, and their share of the voxels:
+/// the specks `sample.remove_specks` removes), free-boundary shares, enclosure and
 /// thin-part ratios, copy F-score, the exemplar's largest region the variant
 /// lacks and the voxels it has where the exemplar has none (`gone`, `added`:
 /// a part lost with nothing in its place is gone > 0, added 0), where the
@@ -44,7 +46,7 @@ fn main() -> anyhow::Result<()> {
         println!("exemplar {:>4}^3: columns of one run along x {x:.2}, y {y:.2}, z {z:.2}", l.resolution);
     }
     println!("exemplar sheet axis (decided at the structure level): {}", sheet.map_or("none".into(), |a| ["x", "y", "z"][a].to_string()));
-    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "holes", "cracks", "score");
+    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>13} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "loose", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "holes", "cracks", "score");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for ex in levels.iter().filter(|l| l.resolution <= args.max_resolution) {
@@ -61,13 +63,17 @@ fn main() -> anyhow::Result<()> {
                 Some(a) => (height_field::enclosed_columns(&v, a).len().to_string(), height_field::step_cracks(&v, a).to_string()),
                 None => ("-".into(), "-".into()),
             };
+            let loose = vs.components.len() - vs.pieces();
+            let loose_share = vs.components[vs.components.len().min(vs.pieces())..].iter().sum::<usize>() as f64 / vs.voxels.max(1) as f64;
             println!(
-                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6} {:>6} {:>6.3}  {}",
+                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>5} {:>7.4} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6} {:>6} {:>6.3}  {}",
                 ex.resolution,
                 s.mass_ratio,
                 s.extent_ratio,
                 s.pieces,
                 s.exemplar_pieces,
+                loose,
+                loose_share,
                 s.free_boundary,
                 s.exemplar_free_boundary,
                 s.enclosure_ratio,
