@@ -173,6 +173,25 @@ impl Level {
                 && self.mask[i].is_finite())
         })
     }
+    /// This level with its voxels in coordinate order (x, then y, then z:
+    /// the order the networks' sparse grid gives its levels), so what is
+    /// made from it does not depend on the order a file stored them in.
+    pub fn in_coordinate_order(&self) -> Level {
+        let key = |c: IVec3| (c.x, c.y, c.z);
+        if self.coords.windows(2).all(|w| key(w[0]) < key(w[1])) {
+            return self.clone();
+        }
+        let mut idx: Vec<usize> = (0..self.len()).collect();
+        idx.sort_unstable_by_key(|&i| key(self.coords[i]));
+        Level {
+            coords: idx.iter().map(|&i| self.coords[i]).collect(),
+            offsets: idx.iter().map(|&i| self.offsets[i]).collect(),
+            normals: idx.iter().map(|&i| self.normals[i]).collect(),
+            colours: idx.iter().map(|&i| self.colours[i]).collect(),
+            mask: idx.iter().map(|&i| self.mask[i]).collect(),
+            ..self.clone()
+        }
+    }
     /// Keep only the voxels for which `keep` is true.
     pub fn retain(&mut self, keep: impl Fn(usize) -> bool) {
         let idx: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();

@@ -421,6 +421,9 @@ pub fn extend(
             exemplar_levels.len().saturating_sub(1)
         )));
     }
+    // The matches' random draws follow the voxels' order: a level read back
+    // from its file continues as the one sampled in memory did.
+    let coarse = &coarse.in_coordinate_order();
     let mut out: Vec<Level> = Vec::new();
     let mut sources: Option<Vec<IVec3>> = None;
     for l in coarse.index + 1..=last {

@@ -214,3 +214,24 @@ fn specks_are_removed_level_by_level_where_asked() {
         l.check().unwrap();
     }
 }
+
+/// A level read back from its file holds its voxels in the file's order:
+/// the transfer from it is the one from the level in coordinate order, so
+/// `sample --from` an unedited level reproduces the finer levels.
+#[test]
+fn the_transfer_does_not_depend_on_the_order_of_the_coarse_voxels() {
+    let levels = sphere_levels(&[16, 32, 64], DVec3::ZERO, 0.5);
+    let sorted = levels[0].in_coordinate_order();
+    let mut reversed = sorted.clone();
+    reversed.coords.reverse();
+    reversed.offsets.reverse();
+    reversed.normals.reverse();
+    reversed.colours.reverse();
+    reversed.mask.reverse();
+    assert_ne!(reversed.coords, sorted.coords);
+    let a = extend(&levels, &sorted, 2, &on(), 3, &[]).unwrap();
+    let b = extend(&levels, &reversed, 2, &on(), 3, &[]).unwrap();
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!((&x.coords, &x.offsets, &x.normals, &x.colours), (&y.coords, &y.offsets, &y.normals, &y.colours), "level {}", x.index);
+    }
+}
