@@ -64,7 +64,8 @@ fn main() -> anyhow::Result<()> {
                 None => ("-".into(), "-".into()),
             };
             let loose = vs.components.len() - vs.pieces();
-            let loose_share = vs.components[vs.components.len().min(vs.pieces())..].iter().sum::<usize>() as f64 / vs.voxels.max(1) as f64;
+            // Components are sorted largest first: the pieces, then the loose ones.
+            let loose_share = vs.components[vs.pieces()..].iter().sum::<usize>() as f64 / vs.voxels.max(1) as f64;
             println!(
                 "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>5} {:>7.4} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6} {:>6} {:>6.3}  {}",
                 ex.resolution,

@@ -303,7 +303,7 @@ pub fn sample(
     let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
     // Also when sampling stops at level 0 (see `Models::upsamplers`).
     let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
-    let repairs = crate::level::repair::repairs(exemplar_levels, opts.remove_specks, opts.mend_sheets);
+    let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {

@@ -183,23 +183,25 @@ impl Level {
         }
         let mut idx: Vec<usize> = (0..self.len()).collect();
         idx.sort_unstable_by_key(|&i| key(self.coords[i]));
+        self.rows(&idx)
+    }
+    /// The level of voxels `idx` of this one, in that order.
+    pub fn rows(&self, idx: &[usize]) -> Level {
         Level {
+            index: self.index,
+            resolution: self.resolution,
+            frame: self.frame,
             coords: idx.iter().map(|&i| self.coords[i]).collect(),
             offsets: idx.iter().map(|&i| self.offsets[i]).collect(),
             normals: idx.iter().map(|&i| self.normals[i]).collect(),
             colours: idx.iter().map(|&i| self.colours[i]).collect(),
             mask: idx.iter().map(|&i| self.mask[i]).collect(),
-            ..self.clone()
         }
     }
     /// Keep only the voxels for which `keep` is true.
     pub fn retain(&mut self, keep: impl Fn(usize) -> bool) {
         let idx: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();
-        self.coords = idx.iter().map(|&i| self.coords[i]).collect();
-        self.offsets = idx.iter().map(|&i| self.offsets[i]).collect();
-        self.normals = idx.iter().map(|&i| self.normals[i]).collect();
-        self.colours = idx.iter().map(|&i| self.colours[i]).collect();
-        self.mask = idx.iter().map(|&i| self.mask[i]).collect();
+        *self = self.rows(&idx);
     }
 }
 

@@ -45,18 +45,20 @@ impl Repaired {
 
 /// Per exemplar level, what a variant's level of the same index gets:
 /// specks below the exemplar's smallest piece removed where `remove_specks`,
-/// holes and cracks mended along the sheet axis
+/// holes and cracks mended along its `sheet_axes`
 /// ([`super::height_field::sheet_axes`]) where `mend_sheets`. Empty when
 /// both are off.
-pub fn repairs(exemplar_levels: &[Level], remove_specks: bool, mend_sheets: bool) -> Vec<LevelRepair> {
+pub fn repairs(exemplar_levels: &[Level], sheet_axes: &[Option<usize>], remove_specks: bool, mend_sheets: bool) -> Vec<LevelRepair> {
     if !remove_specks && !mend_sheets {
         return Vec::new();
     }
-    let axes = if mend_sheets { super::height_field::sheet_axes(exemplar_levels) } else { vec![None; exemplar_levels.len()] };
     exemplar_levels
         .iter()
-        .zip(axes)
-        .map(|(l, sheet_axis)| LevelRepair { exemplar_smallest_piece: remove_specks.then(|| smallest_piece(l)), sheet_axis })
+        .zip(sheet_axes)
+        .map(|(l, &axis)| LevelRepair {
+            exemplar_smallest_piece: remove_specks.then(|| smallest_piece(l)),
+            sheet_axis: axis.filter(|_| mend_sheets),
+        })
         .collect()
 }
 
@@ -93,12 +95,8 @@ impl LevelRepair {
         if let Some(smallest) = self.exemplar_smallest_piece {
             let k = without_specks(level, smallest);
             if k.len() < level.len() {
-                let mut keep = vec![false; level.len()];
-                k.iter().for_each(|&i| keep[i] = true);
-                let mut l = level.clone();
-                l.retain(|i| keep[i]);
+                out = Some(level.rows(&k));
                 kept = k;
-                out = Some(l);
             }
         }
         let mut added = 0;

@@ -276,7 +276,8 @@ pub fn sample_variants(
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
-        let repairs = crate::level::repair::repairs(exemplar_levels, opts.remove_specks, opts.mend_sheets);
+        let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
+        let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
         for (i, v) in variants.iter_mut().enumerate() {
             let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
             let seed = sample::variant_seed(opts.seed, opts.first + i);

@@ -208,7 +208,7 @@ fn specks_are_removed_level_by_level_where_asked() {
     assert_eq!(pieces(&coarse), 2);
     let plain = extend(&levels, &coarse, 2, &on(), 3, &[]).unwrap();
     assert!(plain.iter().any(|l| pieces(l) > 1), "the loose voxel was copied nowhere: nothing to remove");
-    let clean = extend(&levels, &coarse, 2, &on(), 3, &repairs(&levels, true, false)).unwrap();
+    let clean = extend(&levels, &coarse, 2, &on(), 3, &repairs(&levels, &[None; 3], true, false)).unwrap();
     for l in &clean {
         assert_eq!(pieces(l), 1, "level {}", l.index);
         l.check().unwrap();
