@@ -9,7 +9,8 @@ use std::path::PathBuf;
 
 use clap::Parser;
 use shapeshifter::level::height_field;
-use shapeshifter::level::structure::{structure_level, Matching, Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
+use glam::Vec3;
+use shapeshifter::level::structure::{structure_level, unlike_voxels, Matching, Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
 
 /// Prints mass and extent ratios, pieces, loose pieces (`loose`: how many
 /// pieces are under the flags' piece share, and their share of the voxels:
@@ -18,7 +19,8 @@ use shapeshifter::level::structure::{structure_level, Matching, Structure, Struc
 /// lacks and the voxels it has where the exemplar has none (`gone`, `added`:
 /// a part lost with nothing in its place is gone > 0, added 0), where the
 /// exemplar is a sheet its holes and cracks at steps (`holes`, `cracks`;
-/// the exemplar's single-run shares per level and its sheet axis first),
+/// the exemplar's single-run shares per level and its sheet axis first), the
+/// share of the surface like no part of the exemplar (`unlike`, from 32^3),
 /// score and flags per variant and level (16^3 .. 64^3).
 #[derive(Parser, Debug)]
 struct Args {
@@ -30,6 +32,11 @@ struct Args {
     /// what the finer networks tore, e.g. a thin part shredded into flakes).
     #[arg(long, default_value_t = STRUCTURE_RESOLUTION)]
     max_resolution: u32,
+    /// Write each variant's structure level here (DIR/<variant>/level_K.vdb),
+    /// its voxels like no part of the exemplar red and the rest grey, for
+    /// `shapeshifter render`.
+    #[arg(long)]
+    unlike_map: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -46,15 +53,25 @@ fn main() -> anyhow::Result<()> {
         println!("exemplar {:>4}^3: columns of one run along x {x:.2}, y {y:.2}, z {z:.2}", l.resolution);
     }
     println!("exemplar sheet axis (decided at the structure level): {}", sheet.map_or("none".into(), |a| ["x", "y", "z"][a].to_string()));
-    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>13} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "loose", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "holes", "cracks", "score");
+    println!("{:<14} {:>4} {:>6} {:>6} {:>6} {:>13} {:>9} {:>11} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6}  flags", "variant", "res", "mass", "extent", "pieces", "loose", "fb", "exemplar fb", "encl", "thin", "copyF", "gone", "added", "holes", "cracks", "unlike", "score");
     for dir in &args.variants {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for ex in levels.iter().filter(|l| l.resolution <= args.max_resolution) {
             let path = dir.join(format!("level_{}.vdb", ex.index));
-            let Ok((v, _)) = shapeshifter::io::vdb::read_level(&path) else {
+            let Ok((v, provenance)) = shapeshifter::io::vdb::read_level(&path) else {
                 println!("{name:<14} {:>4} missing", ex.resolution);
                 continue;
             };
+            if let (Some(dir), true) = (&args.unlike_map, ex.resolution == STRUCTURE_RESOLUTION) {
+                let unlike = unlike_voxels(&v, ex);
+                let mut painted = v.clone();
+                for (c, &u) in painted.colours.iter_mut().zip(&unlike) {
+                    *c = if u { Vec3::new(0.9, 0.1, 0.1) } else { Vec3::splat(0.7) };
+                }
+                let out = dir.join(&name);
+                std::fs::create_dir_all(&out)?;
+                shapeshifter::io::vdb::write_level(&out.join(format!("level_{}.vdb", ex.index)), &painted, &provenance, Default::default())?;
+            }
             let (vs, es) = (Structure::of(&v), Structure::of(ex));
             let s = StructureScores::new(&v, &vs, ex, &es, &params);
             let (gone, added) = Matching::of(&v, ex).gone_and_added();
@@ -67,7 +84,7 @@ fn main() -> anyhow::Result<()> {
             // Components are sorted largest first: the pieces, then the loose ones.
             let loose_share = vs.components[vs.pieces()..].iter().sum::<usize>() as f64 / vs.voxels.max(1) as f64;
             println!(
-                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>5} {:>7.4} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6} {:>6} {:>6.3}  {}",
+                "{name:<14} {:>4} {:>6.3} {:>6.3} {:>3}/{:<2} {:>5} {:>7.4} {:>9.3} {:>11.3} {:>6.3} {:>6.3} {:>6.3} {:>6} {:>6} {:>6} {:>6} {:>6.3} {:>6.3}  {}",
                 ex.resolution,
                 s.mass_ratio,
                 s.extent_ratio,
@@ -84,6 +101,7 @@ fn main() -> anyhow::Result<()> {
                 added,
                 holes,
                 cracks,
+                s.unlike_share,
                 s.score,
                 s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")
             );

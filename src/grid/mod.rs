@@ -5,6 +5,8 @@
 //! edit); it imports nothing of theirs.
 
 pub mod key;
+pub mod occupancy;
+pub mod patches;
 pub mod transform;
 
 pub use key::{VoxelIndex, VoxelMap};

@@ -158,6 +158,67 @@ pub fn thin_count(level: &Level) -> usize {
     thin_voxels(level, THIN_DEPTH).iter().filter(|&&t| t).count()
 }
 
+/// Best IoU below which a voxel's neighbourhood is like no part of the
+/// exemplar ([`unlike_share`]). At 64^3, half the voxels of an 11^3 window
+/// in common: a tower's wall matches another stretch of its wall at 0.7-1.0,
+/// a slab fallen outward or a heap of rubble at 0.2-0.5.
+pub const UNLIKE_IOU: f64 = 0.5;
+
+/// Levels coarser than this are not compared patch by patch: at 16^3 an
+/// 11^3 window holds most of the shape.
+const UNLIKE_MIN_RESOLUTION: u32 = 32;
+
+/// Per row of `shape` (false for inactive voxels): whether the surface
+/// voxel's 11^3 neighbourhood (the voxels of its level around it) overlaps
+/// each 11^3 neighbourhood of `exemplar`'s level (the same resolution), at
+/// every place and shift, with an IoU below [`UNLIKE_IOU`]: a part with no
+/// counterpart anywhere on the exemplar, out of its style (a wall fallen
+/// outward, a heap of rubble, a wall split into ragged sheets). A new
+/// arrangement of the exemplar's own parts shares its neighbourhoods; so does
+/// the exemplar moved by whole voxels. Not turned: a wall at an angle the
+/// exemplar has none at is unlike it. Matched exactly and exhaustively
+/// ([`crate::grid::patches`], the matching of eval's LP-IoU). All false
+/// below 32^3.
+pub fn unlike_voxels(shape: &Level, exemplar: &Level) -> Vec<bool> {
+    use crate::grid::patches::{best_iou_at_every_surface_voxel, ExemplarPatches};
+    let mut unlike = vec![false; shape.len()];
+    if shape.resolution < UNLIKE_MIN_RESOLUTION || shape.resolution != exemplar.resolution {
+        return unlike;
+    }
+    let dictionary = ExemplarPatches::new(&voxel_set(exemplar), 1);
+    let rows: VoxelMap<usize> = (0..shape.len()).filter(|&i| shape.mask[i] > 0.0).map(|i| (shape.coords[i], i)).collect();
+    for (c, iou) in best_iou_at_every_surface_voxel(&voxel_set(shape), &dictionary) {
+        if iou < UNLIKE_IOU {
+            if let Some(&i) = rows.get(IVec3::new(c[0] as i32, c[1] as i32, c[2] as i32)) {
+                unlike[i] = true;
+            }
+        }
+    }
+    unlike
+}
+
+/// The share of `shape`'s surface voxels that are [`unlike_voxels`] (0 for
+/// an empty shape and below 32^3).
+pub fn unlike_share(shape: &Level, exemplar: &Level) -> f64 {
+    let active = shape.mask.iter().filter(|&&m| m > 0.0).count();
+    if active == 0 {
+        return 0.0;
+    }
+    unlike_voxels(shape, exemplar).iter().filter(|&&u| u).count() as f64 / active as f64
+}
+
+/// A level's surface voxels (mask > 0) as a bit set on its own lattice.
+fn voxel_set(level: &Level) -> crate::grid::occupancy::Occupancy {
+    let r = level.resolution;
+    let mut set = crate::grid::occupancy::Occupancy::empty([r, r, r]);
+    for (c, &m) in level.coords.iter().zip(&level.mask) {
+        if m > 0.0 {
+            set.set(c.x as i64, c.y as i64, c.z as i64);
+        }
+    }
+    set
+}
+
 /// Sizes of the 26-connected components of a voxel set, largest first.
 pub fn components(coords: &[IVec3]) -> Vec<usize> {
     let (_, mut sizes) = component_labels(coords);
@@ -375,6 +436,13 @@ pub struct StructureParams {
     /// 3 columns at 64^3 on the terrain of ../shared/data, where its
     /// variants with holes seen from above have 3-62.
     pub max_hole_share: f64,
+    /// More of the surface like no part of the exemplar than this share
+    /// ([`unlike_share`], at the structure level): out of style. 0.09,
+    /// measured (docs/results.md, "Out of style"): the ruined tower's
+    /// variants with a wall fallen outward or a heap of rubble read
+    /// 0.10-0.16, those a person keeps 0-0.08; every terrain variant 0.01-0.09,
+    /// every bunny variant 0-0.07.
+    pub max_unlike_share: f64,
 }
 
 impl Default for StructureParams {
@@ -391,6 +459,7 @@ impl Default for StructureParams {
             min_thin_ratio: 0.8,
             min_exemplar_thin_share: 0.02,
             max_hole_share: 0.001,
+            max_unlike_share: 0.09,
         }
     }
 }
@@ -427,6 +496,9 @@ pub enum Flag {
     /// Holes through a sheet the exemplar has none in (a terrain seen from
     /// above with the sky through it).
     Holed,
+    /// Much of its surface like no part of the exemplar: a wall fallen
+    /// outward, a heap of rubble, ragged sheets.
+    OutOfStyle,
     /// Nearly the exemplar itself.
     NearCopy,
 }
@@ -442,6 +514,7 @@ impl Flag {
             Flag::SeenThrough => "seen_through",
             Flag::ThinPartLost => "thin_part_lost",
             Flag::Holed => "holed",
+            Flag::OutOfStyle => "out_of_style",
             Flag::NearCopy => "near_copy",
         }
     }
@@ -488,6 +561,10 @@ pub struct StructureScores {
     /// `hole_columns` are counted; none for other shapes.
     #[serde(default)]
     pub sheet_axis: Option<usize>,
+    /// Share of the surface voxels like no part of the exemplar
+    /// ([`unlike_share`]; 0 below 32^3).
+    #[serde(default)]
+    pub unlike_share: f64,
     /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
     /// (1: the exemplar's surface, voxel for voxel).
     pub copy_fscore: f64,
@@ -496,7 +573,8 @@ pub struct StructureScores {
     #[serde(default)]
     pub largest_change: f64,
     /// One figure in [0, 1], 1 = the exemplar's structure: the worst of the
-    /// mass, extent, piece, free-boundary, enclosure, seen-through and hole terms
+    /// mass, extent, piece, free-boundary, enclosure, seen-through, hole and
+    /// out-of-style terms
     /// ([`StructureScores::new`]).
     pub score: f64,
     pub flags: Vec<Flag>,
@@ -511,7 +589,8 @@ impl StructureScores {
     /// [`StructureParams::free_boundary_limit`] / the variant's share, at most
     /// 1: below 1 exactly when flagged torn); enclosure (variant / exemplar, at most 1);
     /// seen through (the limit / the excess, at most 1: below 1 exactly when flagged);
-    /// holes (the limit / the hole columns, at most 1: below 1 exactly when flagged).
+    /// holes (the limit / the hole columns, at most 1: below 1 exactly when flagged);
+    /// out of style (the limit / the unlike share, at most 1: below 1 exactly when flagged).
     pub fn new(shape_level: &Level, s: &Structure, exemplar_level: &Level, e: &Structure, p: &StructureParams) -> Self {
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
         let sym = |r: f64| if r > 0.0 { r.min(1.0 / r) } else { 0.0 };
@@ -529,6 +608,7 @@ impl StructureScores {
         let sheet_axis = e.sheet_axis;
         let hole_columns = sheet_axis.map_or(0, |a| s.enclosed_columns[a]);
         let hole_limit = p.max_hole_share * e.voxels as f64;
+        let unlike_share = unlike_share(shape_level, exemplar_level);
         let terms = [
             sym(mass_ratio),
             axis_ratios.iter().map(|&r| sym(r)).fold(1.0, f64::min),
@@ -541,6 +621,7 @@ impl StructureScores {
                 1.0
             },
             if hole_columns > 0 { (hole_limit / hole_columns as f64).min(1.0) } else { 1.0 },
+            if unlike_share > 0.0 { (p.max_unlike_share / unlike_share).min(1.0) } else { 1.0 },
         ];
         let matching = Matching::of(shape_level, exemplar_level);
         let (copy_fscore, largest_change) = (matching.fscore(), matching.largest_change());
@@ -569,6 +650,9 @@ impl StructureScores {
         if hole_columns as f64 > hole_limit {
             flags.push(Flag::Holed);
         }
+        if unlike_share > p.max_unlike_share {
+            flags.push(Flag::OutOfStyle);
+        }
         if copy_fscore >= p.copy_fscore && largest_change < p.copy_max_change {
             flags.push(Flag::NearCopy);
         }
@@ -585,6 +669,7 @@ impl StructureScores {
             thin_ratio,
             hole_columns,
             sheet_axis,
+            unlike_share,
             copy_fscore,
             largest_change,
             score: terms.iter().copied().fold(1.0, f64::min),
@@ -817,6 +902,38 @@ mod tests {
         assert!(gone >= above && gone < whole.len() / 4 && added == 0, "gone {gone}, added {added}, {above} above the cut");
         // The other way round the cap is added and nothing is gone.
         assert_eq!(Matching::of(&whole, &capless).gone_and_added(), (0, gone));
+    }
+
+    #[test]
+    fn a_part_like_nothing_on_the_exemplar_is_out_of_style_and_the_exemplar_moved_is_not() {
+        let p = StructureParams::default();
+        let voxel = 2.0 / 64.0;
+        let exemplar = spheres(64, &[(Vec3::ZERO, 0.55)]);
+        let e = Structure::of(&exemplar);
+        let same = StructureScores::new(&exemplar, &e, &exemplar, &e, &p);
+        assert_eq!(same.unlike_share, 0.0);
+        // Moved by whole voxels, every neighbourhood is one of the exemplar's.
+        let moved = spheres(64, &[(Vec3::new(2.0 * voxel, voxel, 0.0), 0.55)]);
+        let m = StructureScores::new(&moved, &Structure::of(&moved), &exemplar, &e, &p);
+        assert!(m.unlike_share < 0.01 && !m.flags.contains(&Flag::OutOfStyle), "{m:?}");
+        // A fan of thin rods (small spheres, 3 voxels across) splayed out and
+        // down from its side, as a wall fallen outward: nothing on a ball is
+        // like it.
+        let mut fan = vec![(Vec3::ZERO, 0.55)];
+        for a in [20.0f32, 35.0, 50.0] {
+            let dir = Vec3::new(a.to_radians().cos(), -a.to_radians().sin(), 0.0);
+            for z in [-0.12f32, 0.0, 0.12] {
+                fan.extend((0..10).map(|k| (dir * (0.5 + 0.04 * k as f32) + Vec3::Z * z, 0.045)));
+            }
+        }
+        let fallen = spheres(64, &fan);
+        let f = StructureScores::new(&fallen, &Structure::of(&fallen), &exemplar, &e, &p);
+        assert!(f.unlike_share > p.max_unlike_share && f.flags.contains(&Flag::OutOfStyle) && !f.whole(), "{f:?}");
+        assert!(f.score < 1.0, "{f:?}");
+        // At 16^3 a window spans most of the shape: not compared.
+        let coarse = spheres(16, &fan);
+        let ball = spheres(16, &[(Vec3::ZERO, 0.55)]);
+        assert_eq!(unlike_share(&coarse, &ball), 0.0);
     }
 
     #[test]

@@ -45,7 +45,8 @@
 //!    ([`voxelise_points`], [`voxelise_normalised_points`]).
 //! 3. **IoU and diversity** (`occupancy.rs`): [`iou`] of two occupancies;
 //!    [`diversity`], the mean `1 - IoU` over all pairs of variants.
-//! 4. **Local patches** (`local_patches.rs`): every sampled 11^3 patch of a
+//! 4. **Local patches** (`crate::grid::patches`, shared with the structure
+//!    flags): every sampled 11^3 patch of a
 //!    shape against every patch of the exemplar's dictionary
 //!    ([`ExemplarPatches`]); the best IoU and the best boundary F-score (1-voxel
 //!    tolerance) per patch, averaged, are LP-IoU and LP-F-score, with the
@@ -67,17 +68,16 @@
 
 pub mod colour;
 pub mod detail;
-mod local_patches;
 mod occupancy;
 mod point_distances;
 mod report;
 #[cfg(test)]
-mod test_shapes;
+pub(crate) mod test_shapes;
 mod voxelise;
 
 pub use colour::{ColourParams, ColourPatches, ColourScores};
 pub use detail::{DetailScores, Variation};
-pub use local_patches::{
+pub use crate::grid::patches::{
     best_patch_matches, local_patch_scores, lp_scores, ExemplarPatches, LpParams, LpScores, PatchMatches, PATCH,
     PATCH_WORDS,
 };

@@ -7,7 +7,7 @@ use glam::Vec3;
 
 use super::colour::{self, ColourParams, ColourPatches, ColourScores};
 use super::detail::{DetailScores, Variation};
-use super::local_patches::{best_patch_matches, ExemplarPatches, LpParams, LpScores, PatchMatches};
+use crate::grid::patches::{best_patch_matches, ExemplarPatches, LpParams, LpScores, PatchMatches};
 use super::occupancy::{diversity, same_lattice, Occupancy};
 use super::point_distances::chamfer;
 use crate::level::structure::{Flag, Structure, StructureParams, StructureScores};
@@ -354,7 +354,7 @@ impl EvalReport {
         s += "(22: on the half-resolution lattice); detail: neighbour-normal angles vs the exemplar's (W1, RMS ratio);\n";
         s += "colour: colour patches matched both ways (F-score, coverage; n/a: a one-colour exemplar); chamfer0: level-0 points,\n";
         s += "normalised units; struct: the shape as a whole vs the exemplar at the structure level (1 = its structure),\n";
-        s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed (not whole), near_copy\n";
+        s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed, out_of_style (not whole), near_copy\n";
         s
     }
 }
@@ -382,7 +382,7 @@ impl VariantScores {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::metrics::occupancy::last_word_mask;
+    use crate::grid::occupancy::last_word_mask;
     use crate::eval::metrics::test_shapes::{smooth_shape, unit_grid};
 
     fn scores(name: &str, lp_iou: f64, chamfer: Option<f64>) -> VariantScores {

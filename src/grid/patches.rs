@@ -444,6 +444,20 @@ pub fn best_patch_matches(shape: &Occupancy, dict: &ExemplarPatches, params: &Lp
     }
 }
 
+/// The best IoU in `dict` of the patch centred on every surface voxel of
+/// `shape` (no sampling, no cap), with the voxel, in storage order. Every IoU
+/// is 0 when the dictionary is empty.
+pub fn best_iou_at_every_surface_voxel(shape: &Occupancy, dict: &ExemplarPatches) -> Vec<([u32; 3], f64)> {
+    let layers = PatchLayers::new(shape);
+    let centres = layers.centres(1);
+    if dict.is_empty() {
+        return centres.into_iter().map(|c| (c, 0.0)).collect();
+    }
+    let patches: Vec<Patch> = centres.par_iter().map(|&c| layers.patch(c)).collect();
+    let best = match_patches(&patches, dict);
+    centres.into_iter().zip(best).map(|(c, b)| (c, b.iou_num as f64 / b.iou_den as f64)).collect()
+}
+
 /// Convenience: [`local_patch_scores`] with a fresh exemplar dictionary.
 pub fn lp_scores(variant: &Occupancy, exemplar: &Occupancy, params: &LpParams) -> LpScores {
     same_lattice(variant, exemplar);
