@@ -40,7 +40,7 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
     assert!(outcome.checks.iter().any(|c| c.metric.starts_with("colour.") && c.rung == "shuffled_colours"));
     assert!(outcome.checks.iter().any(|c| c.metric.starts_with("detail.") && c.rung == "blob"));
     // The structural rungs are checked by the structure measures and flags.
-    for rung in ["fragment", "torn", "shrunken", "slit"] {
+    for rung in ["fragment", "torn", "shrunken", "slit", "fallen_wall"] {
         assert!(outcome.checks.iter().any(|c| c.metric == "structure.score" && c.rung == rung), "{rung}");
         assert!(outcome.checks.iter().any(|c| c.metric.starts_with("structure.flags") && c.rung == rung), "{rung}");
     }
@@ -64,6 +64,9 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
     let slit = get(Rung::Slit).structure.as_ref().expect("structure measured");
     assert!(slit.flags.contains(&shapeshifter::level::structure::Flag::SeenThrough), "{:?} excess {}", slit.flags, slit.seen_through_excess);
     assert!(torn_flags.contains(&shapeshifter::level::structure::Flag::Torn), "{torn_flags:?}");
+    // A wall fallen outward: its surface is like no part of the exemplar.
+    let fallen = get(Rung::FallenWall).structure.as_ref().expect("structure measured");
+    assert!(fallen.flags.contains(&shapeshifter::level::structure::Flag::OutOfStyle), "{:?} unlike {}", fallen.flags, fallen.unlike_share);
     let flags = outcome.evaluation.report.structure.as_ref().expect("structure measured");
     assert!(flags.near_copies >= 1 && flags.whole < flags.scored, "{flags:?}");
     assert!(out.join("contact_sheet.png").is_file() && out.join("ladder.json").is_file());

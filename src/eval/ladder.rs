@@ -29,7 +29,10 @@
 //!   on one side: a tower split open), `roof_strip` (a strip 3 voxels wide
 //!   across the whole shape, on one side of the centroid, where the topmost
 //!   upward-facing 64^3 voxels of each column are removed: a roof with a strip
-//!   missing). The `exemplar` rung is also the copy: the near-copy flag must
+//!   missing), `fallen_wall` (on one side, a section half the shape's width
+//!   across, from the ground to 60% of its height, turned 40 degrees outward
+//!   about its foot on every level: a wall fallen outward). The `exemplar`
+//!   rung is also the copy: the near-copy flag must
 //!   fire on it.
 //!
 //! [`expectations`] says which rungs each measure must rank below the
@@ -62,10 +65,11 @@ pub enum Rung {
     Shrunken,
     Slit,
     RoofStrip,
+    FallenWall,
 }
 
 impl Rung {
-    pub const ALL: [Rung; 12] = [
+    pub const ALL: [Rung; 13] = [
         Rung::Exemplar,
         Rung::SmoothWeak,
         Rung::SmoothStrong,
@@ -78,6 +82,7 @@ impl Rung {
         Rung::Shrunken,
         Rung::Slit,
         Rung::RoofStrip,
+        Rung::FallenWall,
     ];
 
     /// Folder name, and the name in reports.
@@ -95,6 +100,7 @@ impl Rung {
             Rung::Shrunken => "shrunken",
             Rung::Slit => "slit",
             Rung::RoofStrip => "roof_strip",
+            Rung::FallenWall => "fallen_wall",
         }
     }
 }
@@ -119,6 +125,8 @@ pub struct LadderOptions {
     /// Width of the slit and of the roof strip, voxels of the 64^3 level.
     pub slit_width: f32,
     pub roof_strip_width: f32,
+    /// How far the fallen wall leans out, degrees from upright.
+    pub fallen_wall_degrees: f32,
 }
 
 impl Default for LadderOptions {
@@ -134,6 +142,7 @@ impl Default for LadderOptions {
             shrink: 0.6,
             slit_width: 2.0,
             roof_strip_width: 3.0,
+            fallen_wall_degrees: 40.0,
         }
     }
 }
@@ -164,6 +173,7 @@ pub fn degrade(levels: &[Level], opts: &LadderOptions) -> Result<Vec<(Rung, Vec<
         (Rung::Torn, torn(levels, opts.torn_holes, opts.torn_radius, opts.seed)),
         (Rung::Shrunken, levels.iter().map(|l| shrunken(l, finest, opts.shrink)).collect()),
         (Rung::Slit, slit(levels, opts.slit_width)),
+        (Rung::FallenWall, fallen_wall(levels, opts.fallen_wall_degrees)),
     ];
     if let Some(r) = roof_strip(levels, opts.roof_strip_width) {
         rungs.push((Rung::RoofStrip, r));
@@ -302,6 +312,59 @@ pub fn slit(levels: &[Level], width: f32) -> Vec<Level> {
         })
         .collect();
     carry(levels, k, &kept, k)
+}
+
+/// The fallen-wall rung: on one side, a section of the shape half its width
+/// across and from the ground up to 60% of its height (centres
+/// within that slab of the 64^3 level's frame, in normalised units, so every
+/// level cuts the same section) turned outward by `degrees` about a
+/// horizontal axis at its foot, on the shape's outer face: a wall fallen
+/// outward, as coarse networks make it. Every level gets the same turn; the
+/// turned points, normals and colours are binned into voxels again.
+pub fn fallen_wall(levels: &[Level], degrees: f32) -> Vec<Level> {
+    let k = level_at(levels, 64);
+    let level = &levels[k];
+    let (act, up, across, centroid) = cut_frame(level);
+    let outwards = up.cross(across);
+    // Level k's voxel units -> normalised units.
+    let vs = level.voxel_size() as f32;
+    let centre = centroid * vs - Vec3::ONE;
+    let rel: Vec<Vec3> = act.iter().map(|&i| point_voxels(level, i) * vs - Vec3::ONE - centre).collect();
+    let range = |dir: Vec3| rel.iter().map(|p| p.dot(dir)).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)));
+    let ((ground, top), (left, right), (_, reach)) = (range(up), range(across), range(outwards));
+    let half_width = 0.25 * (right - left);
+    let height = ground + 0.6 * (top - ground);
+    let in_section = |p: Vec3| p.dot(outwards) > 0.0 && p.dot(across).abs() < half_width && p.dot(up) < height;
+    // The foot of the outer face, and the turn that takes up towards outwards.
+    let pivot = centre + outwards * reach + up * ground;
+    let turn = glam::Quat::from_axis_angle(-across, degrees.to_radians());
+    levels
+        .iter()
+        .map(|l| {
+            let lv = l.voxel_size() as f32;
+            let in_turn: Vec<bool> =
+                (0..l.len()).map(|i| l.mask[i] > 0.0 && in_section(point_voxels(l, i) * lv - Vec3::ONE - centre)).collect();
+            let turned: Vec<usize> = (0..l.len()).filter(|&i| in_turn[i]).collect();
+            let points: Vec<Vec3> =
+                turned.iter().map(|&i| (pivot + turn * (point_voxels(l, i) * lv - Vec3::ONE - pivot) + Vec3::ONE) / lv).collect();
+            let normals: Vec<Vec3> = turned.iter().map(|&i| turn * l.normals[i]).collect();
+            let colours: Vec<Vec3> = turned.iter().map(|&i| l.colours[i]).collect();
+            let fallen = rebin(l, &points, &normals, &colours);
+            // The rest stays voxel for voxel; the fallen section fills only
+            // voxels the rest leaves empty.
+            let mut out = l.clone();
+            out.retain(|i| !in_turn[i]);
+            let kept: std::collections::HashSet<IVec3> = out.coords.iter().copied().collect();
+            for i in (0..fallen.len()).filter(|&i| !kept.contains(&fallen.coords[i])) {
+                out.coords.push(fallen.coords[i]);
+                out.offsets.push(fallen.offsets[i]);
+                out.normals.push(fallen.normals[i]);
+                out.colours.push(fallen.colours[i]);
+                out.mask.push(1.0);
+            }
+            out
+        })
+        .collect()
 }
 
 /// The roof-strip rung: within a strip `width` voxels wide across the whole
@@ -582,7 +645,7 @@ pub struct Expectation {
 
 const GEOMETRY_RUNGS: &[Rung] = &[Rung::SmoothWeak, Rung::SmoothStrong, Rung::Blob, Rung::Untrained];
 /// The structural faults of coarse networks.
-const STRUCTURE_RUNGS: &[Rung] = &[Rung::Fragment, Rung::Torn, Rung::Shrunken, Rung::Slit, Rung::RoofStrip];
+const STRUCTURE_RUNGS: &[Rung] = &[Rung::Fragment, Rung::Torn, Rung::Shrunken, Rung::Slit, Rung::RoofStrip, Rung::FallenWall];
 
 /// A structure figure of a row; NaN (fails every check) when not measured.
 fn structure(v: &VariantScores, f: fn(&crate::level::structure::StructureScores) -> f64) -> f64 {
@@ -695,13 +758,14 @@ pub fn check(rows: &[VariantScores], colourful: bool) -> Vec<CheckResult> {
 pub fn check_flags(rows: &[VariantScores]) -> Vec<CheckResult> {
     use crate::level::structure::Flag;
     use Rung::*;
-    let expected: [(Rung, Option<Flag>, &str); 10] = [
+    let expected: [(Rung, Option<Flag>, &str); 11] = [
         (Exemplar, Some(Flag::NearCopy), "flagged near_copy, nothing broken"),
         (Fragment, Some(Flag::Fragment), "flagged fragment"),
         (Torn, Some(Flag::Torn), "flagged torn"),
         (Shrunken, Some(Flag::Shrunken), "flagged shrunken"),
         (Slit, Some(Flag::SeenThrough), "flagged seen_through"),
         (RoofStrip, Some(Flag::SeenThrough), "flagged seen_through"),
+        (FallenWall, Some(Flag::OutOfStyle), "flagged out_of_style"),
         (SmoothWeak, None, "nothing broken"),
         (WashedOut, None, "nothing broken"),
         (ShuffledColours, None, "nothing broken"),
@@ -794,6 +858,30 @@ mod tests {
         for i in 0..b.len() {
             let p = b.point_normalised(i).as_vec3();
             assert!((p.length() - 0.7).abs() < 0.06, "{p}");
+        }
+    }
+
+    #[test]
+    fn the_fallen_wall_leans_one_side_out_past_the_shape_and_leaves_the_other_side() {
+        let levels = crate::testing::synthetic::sphere_levels(&[16, 32, 64], glam::DVec3::ZERO, 0.6);
+        let fallen = fallen_wall(&levels, 40.0);
+        let (_, up, across, _) = cut_frame(&levels[2]);
+        let outwards = up.cross(across);
+        for (before, after) in levels.iter().zip(&fallen) {
+            assert_eq!((after.index, after.resolution), (before.index, before.resolution));
+            // The turned section is binned again: about as many voxels.
+            let ratio = after.len() as f64 / before.len() as f64;
+            assert!((0.8..1.2).contains(&ratio), "{} of {}", after.len(), before.len());
+            // It leans out past the sphere, on its one side, above the ground.
+            let reach = |l: &Level| (0..l.len()).map(|i| l.point_normalised(i).as_vec3().dot(outwards)).fold(f32::MIN, f32::max);
+            assert!(reach(after) > reach(before) + 0.2, "{} vs {}", reach(after), reach(before));
+            // The far side is untouched, voxel for voxel.
+            let far = |l: &Level| {
+                let mut c: Vec<IVec3> = (0..l.len()).filter(|&i| l.point_normalised(i).as_vec3().dot(outwards) < -0.1).map(|i| l.coords[i]).collect();
+                c.sort_by_key(|v| (v.x, v.y, v.z));
+                c
+            };
+            assert_eq!(far(after), far(before));
         }
     }
 }
