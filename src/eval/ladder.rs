@@ -356,11 +356,7 @@ pub fn fallen_wall(levels: &[Level], degrees: f32) -> Vec<Level> {
             out.retain(|i| !in_turn[i]);
             let kept: std::collections::HashSet<IVec3> = out.coords.iter().copied().collect();
             for i in (0..fallen.len()).filter(|&i| !kept.contains(&fallen.coords[i])) {
-                out.coords.push(fallen.coords[i]);
-                out.offsets.push(fallen.offsets[i]);
-                out.normals.push(fallen.normals[i]);
-                out.colours.push(fallen.colours[i]);
-                out.mask.push(1.0);
+                out.push_row(&fallen, i, fallen.coords[i]);
             }
             out
         })

@@ -96,11 +96,7 @@ pub fn copy_box(level: &mut Level, region: VoxelBox, to: IVec3) -> Result<usize>
     let coords = level.coords.clone();
     level.retain(|i| !dest.contains(coords[i]));
     for (c, i) in copies {
-        level.coords.push(c);
-        level.offsets.push(src.offsets[i]);
-        level.normals.push(src.normals[i]);
-        level.colours.push(src.colours[i]);
-        level.mask.push(src.mask[i]);
+        level.push_row(&src, i, c);
     }
     Ok(picked.len())
 }

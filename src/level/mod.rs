@@ -198,6 +198,15 @@ impl Level {
             mask: idx.iter().map(|&i| self.mask[i]).collect(),
         }
     }
+    /// Appends voxel `i` of `src` (its offset, normal, colour and mask) at
+    /// coordinate `at` of this level.
+    pub fn push_row(&mut self, src: &Level, i: usize, at: IVec3) {
+        self.coords.push(at);
+        self.offsets.push(src.offsets[i]);
+        self.normals.push(src.normals[i]);
+        self.colours.push(src.colours[i]);
+        self.mask.push(src.mask[i]);
+    }
     /// Keep only the voxels for which `keep` is true.
     pub fn retain(&mut self, keep: impl Fn(usize) -> bool) {
         let idx: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();

@@ -60,11 +60,7 @@ pub fn sphere_union(res: u32, spheres: &[(Vec3, f64)]) -> Level {
             Some(o) => {
                 let have: std::collections::HashSet<IVec3> = o.coords.iter().copied().collect();
                 for i in (0..l.len()).filter(|&i| !have.contains(&l.coords[i])) {
-                    o.coords.push(l.coords[i]);
-                    o.offsets.push(l.offsets[i]);
-                    o.normals.push(l.normals[i]);
-                    o.colours.push(l.colours[i]);
-                    o.mask.push(l.mask[i]);
+                    o.push_row(&l, i, l.coords[i]);
                 }
             }
         }
