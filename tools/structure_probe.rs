@@ -32,7 +32,8 @@ struct Args {
     /// what the finer networks tore, e.g. a thin part shredded into flakes).
     #[arg(long, default_value_t = STRUCTURE_RESOLUTION)]
     max_resolution: u32,
-    /// Write each variant's structure level here (DIR/<variant>/level_K.vdb),
+    /// Write each variant's structure level (64^3, or the finest coarser one
+    /// the exemplar has) here (DIR/<variant>/level_K.vdb),
     /// its voxels like no part of the exemplar red and the rest grey, for
     /// `shapeshifter render`.
     #[arg(long)]
@@ -62,13 +63,13 @@ fn main() -> anyhow::Result<()> {
                 println!("{name:<14} {:>4} missing", ex.resolution);
                 continue;
             };
-            if let (Some(dir), true) = (&args.unlike_map, ex.resolution == STRUCTURE_RESOLUTION) {
+            if let (Some(map_dir), true) = (&args.unlike_map, structure_level(&levels).is_some_and(|s| s.index == ex.index)) {
                 let unlike = unlike_voxels(&v, ex);
                 let mut painted = v.clone();
                 for (c, &u) in painted.colours.iter_mut().zip(&unlike) {
                     *c = if u { Vec3::new(0.9, 0.1, 0.1) } else { Vec3::splat(0.7) };
                 }
-                let out = dir.join(&name);
+                let out = map_dir.join(&name);
                 std::fs::create_dir_all(&out)?;
                 shapeshifter::io::vdb::write_level(&out.join(format!("level_{}.vdb", ex.index)), &painted, &provenance, Default::default())?;
             }

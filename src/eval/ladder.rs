@@ -81,8 +81,8 @@ impl Rung {
         Rung::Torn,
         Rung::Shrunken,
         Rung::Slit,
-        Rung::RoofStrip,
         Rung::FallenWall,
+        Rung::RoofStrip,
     ];
 
     /// Folder name, and the name in reports.
@@ -315,12 +315,13 @@ pub fn slit(levels: &[Level], width: f32) -> Vec<Level> {
 }
 
 /// The fallen-wall rung: on one side, a section of the shape half its width
-/// across and from the ground up to 60% of its height (centres
-/// within that slab of the 64^3 level's frame, in normalised units, so every
-/// level cuts the same section) turned outward by `degrees` about a
-/// horizontal axis at its foot, on the shape's outer face: a wall fallen
-/// outward, as coarse networks make it. Every level gets the same turn; the
-/// turned points, normals and colours are binned into voxels again.
+/// across and from the ground up to 60% of its height (surface points within
+/// that slab of the 64^3 level's frame, in normalised units, so every level
+/// cuts the same section) turned outward by `degrees` about a horizontal axis
+/// at its foot, on the section's outer face: a wall fallen outward, as coarse
+/// networks make it. Every level gets the same turn; the turned points,
+/// normals and colours are binned into voxels again (points turned past the
+/// level's cube are dropped).
 pub fn fallen_wall(levels: &[Level], degrees: f32) -> Vec<Level> {
     let k = level_at(levels, 64);
     let level = &levels[k];
@@ -331,10 +332,11 @@ pub fn fallen_wall(levels: &[Level], degrees: f32) -> Vec<Level> {
     let centre = centroid * vs - Vec3::ONE;
     let rel: Vec<Vec3> = act.iter().map(|&i| point_voxels(level, i) * vs - Vec3::ONE - centre).collect();
     let range = |dir: Vec3| rel.iter().map(|p| p.dot(dir)).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)));
-    let ((ground, top), (left, right), (_, reach)) = (range(up), range(across), range(outwards));
+    let ((ground, top), (left, right)) = (range(up), range(across));
     let half_width = 0.25 * (right - left);
     let height = ground + 0.6 * (top - ground);
     let in_section = |p: Vec3| p.dot(outwards) > 0.0 && p.dot(across).abs() < half_width && p.dot(up) < height;
+    let reach = rel.iter().filter(|&&p| in_section(p)).map(|p| p.dot(outwards)).fold(0.0, f32::max);
     // The foot of the outer face, and the turn that takes up towards outwards.
     let pivot = centre + outwards * reach + up * ground;
     let turn = glam::Quat::from_axis_angle(-across, degrees.to_radians());

@@ -197,8 +197,11 @@ pub fn unlike_voxels(shape: &Level, exemplar: &Level) -> Vec<bool> {
     unlike
 }
 
-/// The share of `shape`'s surface voxels that are [`unlike_voxels`] (0 for
-/// an empty shape and below 32^3).
+/// The share of `shape`'s surface voxels (mask > 0) that are
+/// [`unlike_voxels`] (0 for an empty shape and below 32^3). A voxel with all
+/// six face neighbours in the level (inside a shell two or more voxels thick)
+/// has no patch of its own and counts as like: the share is of every voxel,
+/// as the limit was measured.
 pub fn unlike_share(shape: &Level, exemplar: &Level) -> f64 {
     let active = shape.mask.iter().filter(|&&m| m > 0.0).count();
     if active == 0 {
