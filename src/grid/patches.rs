@@ -320,6 +320,15 @@ impl Default for Best {
     }
 }
 
+impl Best {
+    fn iou(&self) -> f64 {
+        self.iou_num as f64 / self.iou_den as f64
+    }
+    fn fscore(&self) -> f64 {
+        self.f_num as f64 / self.f_den as f64
+    }
+}
+
 /// LP-IoU and LP-F-score of `variant` against the exemplar's patch dictionary.
 ///
 /// What is computed (all in voxels of the shared lattice):
@@ -429,19 +438,8 @@ fn patch_centres(layers: &PatchLayers, params: &LpParams) -> Vec<[u32; 3]> {
 /// shape has no surface voxels; every score 0 when the dictionary is empty.
 pub fn best_patch_matches(shape: &Occupancy, dict: &ExemplarPatches, params: &LpParams) -> PatchMatches {
     let layers = PatchLayers::new(shape);
-    let centres = patch_centres(&layers, params);
-    if centres.is_empty() {
-        return PatchMatches::default();
-    }
-    if dict.is_empty() {
-        return PatchMatches { iou: vec![0.0; centres.len()], fscore: vec![0.0; centres.len()] };
-    }
-    let patches: Vec<Patch> = centres.par_iter().map(|&c| layers.patch(c)).collect();
-    let best = match_patches(&patches, dict);
-    PatchMatches {
-        iou: best.iter().map(|b| b.iou_num as f64 / b.iou_den as f64).collect(),
-        fscore: best.iter().map(|b| b.f_num as f64 / b.f_den as f64).collect(),
-    }
+    let best = best_at(&layers, &patch_centres(&layers, params), dict);
+    PatchMatches { iou: best.iter().map(Best::iou).collect(), fscore: best.iter().map(Best::fscore).collect() }
 }
 
 /// The best IoU in `dict` of the patch centred on every surface voxel of
@@ -450,12 +448,18 @@ pub fn best_patch_matches(shape: &Occupancy, dict: &ExemplarPatches, params: &Lp
 pub fn best_iou_at_every_surface_voxel(shape: &Occupancy, dict: &ExemplarPatches) -> Vec<([u32; 3], f64)> {
     let layers = PatchLayers::new(shape);
     let centres = layers.centres(1);
-    if dict.is_empty() {
-        return centres.into_iter().map(|c| (c, 0.0)).collect();
+    let best = best_at(&layers, &centres, dict);
+    centres.into_iter().zip(best).map(|(c, b)| (c, b.iou())).collect()
+}
+
+/// The best match in `dict` of the patch centred on each of `centres` (every
+/// score 0 when the dictionary is empty).
+fn best_at(layers: &PatchLayers, centres: &[[u32; 3]], dict: &ExemplarPatches) -> Vec<Best> {
+    if centres.is_empty() || dict.is_empty() {
+        return vec![Best::default(); centres.len()];
     }
     let patches: Vec<Patch> = centres.par_iter().map(|&c| layers.patch(c)).collect();
-    let best = match_patches(&patches, dict);
-    centres.into_iter().zip(best).map(|(c, b)| (c, b.iou_num as f64 / b.iou_den as f64)).collect()
+    match_patches(&patches, dict)
 }
 
 /// Convenience: [`local_patch_scores`] with a fresh exemplar dictionary.

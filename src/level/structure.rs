@@ -443,8 +443,8 @@ pub struct StructureParams {
     /// ([`unlike_share`], at the structure level): out of style. 0.09,
     /// measured (docs/results.md, "Out of style"): the ruined tower's
     /// variants with a wall fallen outward or a heap of rubble read
-    /// 0.10-0.16, those a person keeps 0-0.08; every terrain variant 0.01-0.09,
-    /// every bunny variant 0-0.07.
+    /// 0.098-0.157, those a person keeps 0-0.085; every terrain variant
+    /// 0.006-0.084, every bunny variant 0-0.065; the CAD part's broken fin 0.096.
     pub max_unlike_share: f64,
 }
 

@@ -222,12 +222,7 @@ fn specks_are_removed_level_by_level_where_asked() {
 fn the_transfer_does_not_depend_on_the_order_of_the_coarse_voxels() {
     let levels = sphere_levels(&[16, 32, 64], DVec3::ZERO, 0.5);
     let sorted = levels[0].in_coordinate_order();
-    let mut reversed = sorted.clone();
-    reversed.coords.reverse();
-    reversed.offsets.reverse();
-    reversed.normals.reverse();
-    reversed.colours.reverse();
-    reversed.mask.reverse();
+    let reversed = sorted.rows(&(0..sorted.len()).rev().collect::<Vec<_>>());
     assert_ne!(reversed.coords, sorted.coords);
     let a = extend(&levels, &sorted, 2, &on(), 3, &[]).unwrap();
     let b = extend(&levels, &reversed, 2, &on(), 3, &[]).unwrap();
