@@ -33,7 +33,7 @@ fn main() -> anyhow::Result<()> {
     let provenance = Provenance { exemplar: manifest.exemplar.clone(), seed: Some(options.seed), ..Default::default() };
     for (i, variant) in variants.iter().enumerate() {
         // Levels coarsest first; a variant pruned to nothing has an empty finest level.
-        let finest = variant.last().filter(|l| !l.is_empty());
+        let finest = variant.levels.last().filter(|l| !l.is_empty());
         match finest {
             Some(level) => {
                 let path = out.join(format!("variant_{i:03}_level_{}.vdb", level.index));

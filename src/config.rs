@@ -350,6 +350,17 @@ pub struct SampleConfig {
     /// transfer's loose flecks. Not written when off.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub remove_specks: bool,
+    /// With `level0_pick = novel`: where none of a pass's level-0
+    /// candidates is new enough, the pass starts instead from the
+    /// exemplar bent at random (`level::warp`), each field of the bend moving
+    /// its part by up to this many level-0 voxels; the networks make the
+    /// finer levels (0: never; the candidate least like the exemplar is
+    /// kept). A level-0 network that learned one figure with nothing repeated
+    /// in it (a bunny) offers only the figure again or the figure with a
+    /// part lost; a bent copy is a new pose of the whole figure. Not written
+    /// when 0.
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub bend_voxels: f64,
 }
 
 /// Which level-0 candidate a variant keeps (`sample.level0_pick`).
@@ -464,7 +475,7 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 10] = [
+        let defaults: [(&str, &str, toml::Value); 11] = [
             ("sample", "final_step", toml::Value::String("prediction".into())),
             ("sample", "level0_pick", toml::Value::String("first".into())),
             ("sample", "level0_sampler", toml::Value::String("same".into())),
@@ -474,6 +485,7 @@ impl Config {
             ("sample", "reject_copies", toml::Value::Boolean(false)),
             ("sample", "mend_sheets", toml::Value::Boolean(false)),
             ("sample", "remove_specks", toml::Value::Boolean(false)),
+            ("sample", "bend_voxels", toml::Value::Float(0.0)),
             ("train", "bf16", toml::Value::Boolean(false)),
         ];
         for (section, key, value) in defaults {
@@ -617,6 +629,9 @@ impl Config {
         }
         if self.sample.attempts == 0 || self.sample.attempts > 64 {
             return Err(Error::Invalid("sample.attempts must be in 1..=64".into()));
+        }
+        if !(0.0..=8.0).contains(&self.sample.bend_voxels) {
+            return Err(Error::Invalid("sample.bend_voxels must be in [0, 8] (level-0 voxels)".into()));
         }
         if !(0.0..=1.0).contains(&self.sample.level0_min_structure) {
             return Err(Error::Invalid("sample.level0_min_structure must be in [0, 1]".into()));

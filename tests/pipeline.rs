@@ -6,7 +6,17 @@ use tch::{Device, Kind, Tensor};
 use shapeshifter::config::Config;
 use shapeshifter::level::Level;
 use shapeshifter::learn::nn::{new_diffusion, new_upsampler};
-use shapeshifter::learn::sample::{level0_box, load_models, sample, SampleOptions};
+use shapeshifter::learn::sample::{level0_box, load_models, SampleOptions};
+
+/// [`shapeshifter::learn::sample::sample`], each variant's levels only.
+fn sample(
+    models: &shapeshifter::learn::sample::Models,
+    levels: &[Level],
+    opts: &SampleOptions,
+    from: Option<Level>,
+) -> shapeshifter::error::Result<Vec<Vec<Level>>> {
+    Ok(shapeshifter::learn::sample::sample(models, levels, opts, from)?.into_iter().map(|v| v.levels).collect())
+}
 use shapeshifter::learn::sparse::SparseTensor;
 use shapeshifter::testing::synthetic::sphere_levels;
 use shapeshifter::learn::train::{state_path, train_level, TrainJob, TrainState};
@@ -364,6 +374,36 @@ fn level0_rejection_keeps_the_best_candidate() {
     assert!(better > 0, "four candidates never beat the first one of four variants");
 }
 
+/// Where no level-0 candidate is new enough (here: an untrained network,
+/// whose draws pass nothing), a pass starts from the exemplar bent: its
+/// levels up to the bent one are the exemplar's bent by the recorded bend,
+/// the finer ones the networks'. Without `bend_voxels`, never.
+#[test]
+fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
+    use std::collections::HashSet;
+    let _guard = serial();
+    let levels = sphere_levels(&[8, 16, 32], DVec3::new(0.05, -0.1, 0.0), 0.55);
+    let config = tiny(&["sample.bend_voxels=1.5", "sample.remove_specks=false", "sample.mend_sheets=false"]);
+    let models = shapeshifter::learn::sample::untrained_models(&config, 3, Device::Cpu, 3).unwrap();
+    let opts = SampleOptions { stop_level: Some(2), ..SampleOptions::from_config(&config, 2, 5) };
+    let bent = shapeshifter::learn::sample::sample(&models, &levels, &opts, None).unwrap();
+    let set = |l: &Level| l.coords.iter().copied().collect::<HashSet<IVec3>>();
+    for v in &bent {
+        let bend = v.bend.expect("nothing new enough: the exemplar bent");
+        assert_eq!(v.levels.len(), 3);
+        for l in 0..=shapeshifter::level::warp::BEND_LEVEL {
+            assert_eq!(set(&v.levels[l]), set(&bend.bent(&levels, l)), "level {l} is not the exemplar bent");
+        }
+        assert_ne!(set(&v.levels[1]), set(&levels[1]), "the bend moved nothing");
+    }
+    assert_ne!(bent[0].bend, bent[1].bend, "two variants, one bend");
+    let again = shapeshifter::learn::sample::sample(&models, &levels, &opts, None).unwrap();
+    assert_eq!(bent.iter().map(|v| v.bend).collect::<Vec<_>>(), again.iter().map(|v| v.bend).collect::<Vec<_>>());
+    let off = SampleOptions { bend_voxels: 0.0, ..opts.clone() };
+    let plain = shapeshifter::learn::sample::sample(&models, &levels, &off, None).unwrap();
+    assert!(plain.iter().all(|v| v.bend.is_none()), "bent without bend_voxels");
+}
+
 /// Weights whose recorded parameterisation is not this program's (or was
 /// never recorded) are refused with one line naming the state file.
 #[test]
@@ -424,7 +464,8 @@ fn sampling_with_detail_transfer() {
     assert_eq!(models_needed(&config, &levels, None), 1);
     let models = load_models(dir.path(), &config, 1, Device::Cpu).unwrap();
     let opts = SampleOptions::from_config(&config, 3, 5);
-    let a = sample_variants(&models, &levels, &opts, None).unwrap();
+    let levels_of = |v: Vec<shapeshifter::learn::sample::SampledVariant>| v.into_iter().map(|s| s.levels).collect::<Vec<_>>();
+    let a = levels_of(sample_variants(&models, &levels, &opts, None).unwrap());
     let exemplar_colours: Vec<std::collections::HashSet<[u32; 3]>> =
         levels.iter().map(|l| l.colours.iter().map(|c| c.to_array().map(f32::to_bits)).collect()).collect();
     for v in &a {
@@ -437,15 +478,15 @@ fn sampling_with_detail_transfer() {
             assert_eq!(v[l].frame, levels[0].frame);
         }
     }
-    let b = sample_variants(&models, &levels, &opts, None).unwrap();
+    let b = levels_of(sample_variants(&models, &levels, &opts, None).unwrap());
     assert!(same(&a, &b), "same seed, different output");
-    let shard = sample_variants(&models, &levels, &SampleOptions { first: 1, n: 2, ..opts.clone() }, None).unwrap();
+    let shard = levels_of(sample_variants(&models, &levels, &SampleOptions { first: 1, n: 2, ..opts.clone() }, None).unwrap());
     assert!(same(&shard, &a[1..3]), "a shard differs");
     // Stopping at level 1, and continuing from it, reproduce the same levels.
-    let stop = sample_variants(&models, &levels, &SampleOptions { stop_level: Some(1), ..opts.clone() }, None).unwrap();
+    let stop = levels_of(sample_variants(&models, &levels, &SampleOptions { stop_level: Some(1), ..opts.clone() }, None).unwrap());
     assert!(same(&stop, &a.iter().map(|v| v[..2].to_vec()).collect::<Vec<_>>()));
     let one = SampleOptions { first: 1, n: 1, ..opts.clone() };
-    let cont = sample_variants(&models, &levels, &one, Some(a[1][0].clone())).unwrap();
+    let cont = levels_of(sample_variants(&models, &levels, &one, Some(a[1][0].clone())).unwrap());
     assert_eq!(cont[0].len(), 2, "levels 1 and 2 from level 0");
     // Nothing finer than the exemplar's last level.
     assert!(sample_variants(&models, &levels, &SampleOptions { stop_level: Some(3), ..opts.clone() }, None).is_err(), "level 3 sampled");

@@ -36,6 +36,9 @@ pub struct VariantFiles {
     /// The finest level of at most [`STRUCTURE_RESOLUTION`]^3.
     pub structure: Option<Level>,
     pub mesh: Option<Mesh>,
+    /// The bend of its start, where it started from the exemplar bent
+    /// ([`crate::level::warp::BEND_FILE`]).
+    pub bend: Option<crate::level::warp::Bend>,
 }
 
 pub use crate::level::structure::STRUCTURE_RESOLUTION;
@@ -81,7 +84,14 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let mesh_path = dir.join("mesh.ply");
     let mesh = if mesh_path.is_file() { Some(mesh::load(&mesh_path)?) } else { None };
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    Ok(VariantFiles { name, finest, coarsest, structure, mesh })
+    let bend_path = dir.join(crate::level::warp::BEND_FILE);
+    let bend = if bend_path.is_file() {
+        let text = std::fs::read_to_string(&bend_path).map_err(|e| Error::file(&bend_path, e.to_string()))?;
+        Some(serde_json::from_str(&text).map_err(|e| Error::file(&bend_path, format!("not a bend record: {}", crate::error::one_line(&e.to_string()))))?)
+    } else {
+        None
+    };
+    Ok(VariantFiles { name, finest, coarsest, structure, mesh, bend })
 }
 
 fn points_normalised(level: &Level) -> Vec<Vec3> {
@@ -246,6 +256,9 @@ pub fn evaluate(
         .collect();
     let coarse: Vec<Vec<Vec3>> = variants.iter().map(|v| points_normalised(&v.coarsest)).collect();
     let ex_coarse_pts = points_normalised(ex_coarse);
+    // The exemplar's structure level bent as each bent variant's start was.
+    let bent: Vec<Option<Level>> =
+        variants.iter().map(|v| v.bend.zip(ex_structure).map(|(b, l)| b.bent(&levels, l.index))).collect();
     let exemplar = ShapeInput {
         name: "exemplar".into(),
         occupancy: &ex_occ[0],
@@ -253,18 +266,21 @@ pub fn evaluate(
         finest: ex_fine,
         coarse_points: Some(&ex_coarse_pts),
         structure_level: ex_structure,
+        bent_reference: None,
     };
     let inputs: Vec<ShapeInput> = variants
         .iter()
         .zip(&occs)
         .zip(&coarse)
-        .map(|((v, occ), c)| ShapeInput {
+        .zip(&bent)
+        .map(|(((v, occ), c), b)| ShapeInput {
             name: v.name.clone(),
             occupancy: &occ[0],
             occupancy_22: &occ[1],
             finest: &v.finest,
             coarse_points: Some(c),
             structure_level: v.structure.as_ref(),
+            bent_reference: b.as_ref(),
         })
         .collect();
     metrics::check_shape(&exemplar)

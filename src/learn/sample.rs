@@ -55,6 +55,7 @@ use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
+use crate::level::warp::{Bend, BEND_LEVEL};
 use crate::util::seed::{derive_seed, Stream};
 
 /// The trained networks of every level, read from a training folder.
@@ -192,6 +193,9 @@ pub struct SampleOptions {
     pub mend_sheets: bool,
     /// Whether every level loses its specks (`sample.remove_specks`).
     pub remove_specks: bool,
+    /// A pass whose level-0 candidates are none new enough starts from the
+    /// exemplar bent by up to this many level-0 voxels (`sample.bend_voxels`; 0: never).
+    pub bend_voxels: f64,
 }
 
 impl SampleOptions {
@@ -216,6 +220,7 @@ impl SampleOptions {
             reject_copies: config.sample.reject_copies,
             mend_sheets: config.sample.mend_sheets,
             remove_specks: config.sample.remove_specks,
+            bend_voxels: config.sample.bend_voxels,
         }
     }
 }
@@ -258,16 +263,24 @@ pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
     Ok((new_lo, new_size))
 }
 
+/// One sampled variant: the pruned level of each stage produced, coarsest
+/// first, and the bend its start was bent by, where it started from the
+/// exemplar bent (`sample.bend_voxels`).
+#[derive(Clone, Debug)]
+pub struct SampledVariant {
+    pub levels: Vec<Level>,
+    pub bend: Option<Bend>,
+}
+
 /// Samples `opts.n` variants. `exemplar_levels` gives the level-0 box and the frame.
 /// With `from` (a level of index k, e.g. an edited level file), the levels k+1 ..
-/// are produced from it for every variant; otherwise levels 0 ... Returns, per
-/// variant, the pruned level of each stage produced, coarsest first.
+/// are produced from it for every variant; otherwise levels 0 ...
 pub fn sample(
     models: &Models,
     exemplar_levels: &[Level],
     opts: &SampleOptions,
     from: Option<Level>,
-) -> Result<Vec<Vec<Level>>> {
+) -> Result<Vec<SampledVariant>> {
     if opts.n == 0 {
         return Ok(Vec::new());
     }
@@ -309,6 +322,7 @@ pub fn sample(
             .map(|i| {
                 let job = OneVariant {
                     models,
+                    exemplar_levels,
                     frame,
                     last,
                     box0,
@@ -344,6 +358,8 @@ fn gaussian(rows: usize, seed: u64, level: usize, step: usize, device: Device) -
 /// Everything one variant's coarse-to-fine pass needs.
 struct OneVariant<'a> {
     models: &'a Models,
+    /// The exemplar's levels (a bent start bends them).
+    exemplar_levels: &'a [Level],
     frame: crate::level::Frame,
     last: usize,
     box0: (IVec3, IVec3),
@@ -478,6 +494,13 @@ fn candidate_seed(seed: u64, k: usize) -> u64 {
     } else {
         derive_seed(seed, k as u64, Stream::Level0Candidate, 0)
     }
+}
+
+/// How a pass starts: a level-0 shape drawn by the network (its pruned
+/// tensor and level), or the exemplar bent.
+enum Start {
+    Drawn(SparseTensor, Level),
+    Bent(Bend),
 }
 
 /// A passing level-0 candidate whose 1-voxel-tolerant F-score against the
@@ -616,7 +639,7 @@ impl OneVariant<'_> {
     /// the least like the exemplar's level 0 (the lowest 1-voxel-tolerant
     /// F-score, then the largest changed region); when none passes, the
     /// best scoring.
-    fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<(SparseTensor, Level)> {
+    fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<Start> {
         let (ex_level, ex_structure) = self.exemplar0;
         let params = structure_params(opts);
         let candidates = opts.level0_candidates.max(1);
@@ -629,7 +652,7 @@ impl OneVariant<'_> {
             let x = self.level0(resolution0, candidate_seed(seed, k), opts)?;
             let level = x.to_level(0, self.frame)?;
             if candidates == 1 {
-                return Ok((x, level));
+                return Ok(Start::Drawn(x, level));
             }
             let (score, mut part_lost, likeness) = level0_gate(&level, ex_level, ex_structure, &params);
             if !part_lost && pick.passes(score, false) && params.min_thin_ratio > 0.0 {
@@ -651,6 +674,11 @@ impl OneVariant<'_> {
             }
         }
         let (k, why) = pick.kept().expect("at least one candidate");
+        if !matches!(why, Kept::First | Kept::NewEnough { .. }) && self.bends(opts) {
+            let bend = Bend { seed: derive_seed(seed, 0, Stream::Bend, 0), voxels: opts.bend_voxels as f32 };
+            log::info!("level 0: none of {candidates} candidates new enough: the exemplar bent instead (seed {})", bend.seed);
+            return Ok(Start::Bent(bend));
+        }
         match why {
             Kept::First if k > 0 => log::info!("level 0: candidate {k} kept, {k} rejected"),
             Kept::First => {}
@@ -664,7 +692,19 @@ impl OneVariant<'_> {
             ),
         }
         let kept = if matches!(why, Kept::BestScoring { .. }) { best } else { picked };
-        Ok(kept.expect("the kept candidate is held"))
+        let (x, level) = kept.expect("the kept candidate is held");
+        Ok(Start::Drawn(x, level))
+    }
+
+    /// Whether a pass may start from the exemplar bent: asked for, with the
+    /// novel pick, the exemplar's box, and a network above the bent level
+    /// to make the next one.
+    fn bends(&self, opts: &SampleOptions) -> bool {
+        opts.bend_voxels > 0.0
+            && opts.level0_pick == crate::config::Level0Pick::Novel
+            && opts.extent == [1.0; 3]
+            && self.exemplar_levels.len() > BEND_LEVEL + 1
+            && self.models.levels() > BEND_LEVEL + 1
     }
 
     /// The thin-part voxels of level-0 candidate `x` taken to level 1 by the
@@ -689,16 +729,17 @@ impl OneVariant<'_> {
     /// level; only the kept one goes on to the finer levels (continuing
     /// from a level reproduces the pass that made it, so the variant is the
     /// same as if every attempt had gone to the end).
-    fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<Vec<Level>> {
+    fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<SampledVariant> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
         let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
         let Some((ex_level, ex_structure)) = reference.filter(|_| attempts > 1) else {
-            return Ok(self.pass(self.seed, resolution0, opts, from, self.last)?.0);
+            let (levels, _, bend) = self.pass(self.seed, resolution0, opts, from, self.last)?;
+            return Ok(SampledVariant { levels, bend });
         };
-        let (mut levels, cur) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
+        let (mut levels, cur, bend) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
         let next = levels.len();
         self.descend(cur, next, self.last, opts, &mut levels)?;
-        Ok(levels)
+        Ok(SampledVariant { levels, bend })
     }
 
     /// The levels, up to the structure level, of the pass [`keep_attempt`]
@@ -711,19 +752,25 @@ impl OneVariant<'_> {
         ex_level: &Level,
         ex_structure: &Structure,
         attempts: usize,
-    ) -> Result<(Vec<Level>, SparseTensor)> {
+    ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
         let params = structure_params(opts);
         let (a, rank, kept) = keep_attempt(attempts, opts.reject_copies, |a| {
-            let (levels, cur) = self.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
+            let (levels, cur, bend) = self.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
             let level = &levels[ex_level.index];
             let rank = if level.is_empty() {
                 AttemptRank { whole: false, new: false, score: 0.0 }
             } else {
-                let s = StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, &params);
-                log::debug!("attempt {a}: structure {:.3} {:?}", s.score, s.flags);
+                let s = match &bend {
+                    None => StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, &params),
+                    Some(b) => {
+                        let bent = b.bent(self.exemplar_levels, ex_level.index);
+                        StructureScores::against_bend(level, &Structure::of(level), (&bent, &Structure::of(&bent)), ex_level, &params)
+                    }
+                };
+                log::debug!("attempt {a}{}: structure {:.3} {:?}", if bend.is_some() { " (bent)" } else { "" }, s.score, s.flags);
                 AttemptRank { whole: s.whole(), new: !s.flags.contains(&Flag::NearCopy), score: s.score }
             };
-            Ok((rank, (levels, cur)))
+            Ok((rank, (levels, cur, bend)))
         })?;
         let res = ex_level.resolution;
         match (rank.accepted(opts.reject_copies), rank.whole) {
@@ -752,22 +799,39 @@ impl OneVariant<'_> {
         opts: &SampleOptions,
         from: Option<&Level>,
         last: usize,
-    ) -> Result<(Vec<Level>, SparseTensor)> {
+    ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
         let mut out = Vec::new();
+        let mut bend = None;
         let (cur, first) = match from {
-            None => {
-                let (pruned, level) = self.chosen_level0(level0_seed, resolution0, opts)?;
-                let (pruned, level) = self.repaired(pruned, level)?;
-                out.push(level);
-                (pruned, 1)
-            }
+            None => match self.chosen_level0(level0_seed, resolution0, opts)? {
+                Start::Drawn(pruned, level) => {
+                    let (pruned, level) = self.repaired(pruned, level)?;
+                    out.push(level);
+                    (pruned, 1)
+                }
+                Start::Bent(b) => {
+                    // The exemplar's levels up to the bent one, bent; each
+                    // through the tensor, so its rows are in the grid's order.
+                    let mut cur = None;
+                    for l in 0..=BEND_LEVEL.min(last).min(self.last) {
+                        let bent = b.bent(self.exemplar_levels, l);
+                        let pruned = SparseTensor::from_level(&bent, self.models.device)?.prune_by_mask()?;
+                        let level = pruned.to_level(l, self.frame)?;
+                        let (pruned, level) = self.repaired(pruned, level)?;
+                        out.push(level);
+                        cur = Some(pruned);
+                    }
+                    bend = Some(b);
+                    (cur.expect("level 0 at least"), out.len())
+                }
+            },
             Some(level) => {
                 let one = SparseTensor::from_level(level, self.models.device)?.prune_by_mask()?;
                 (one, level.index + 1)
             }
         };
         let cur = self.descend(cur, first, last, opts, &mut out)?;
-        Ok((out, cur))
+        Ok((out, cur, bend))
     }
 
     /// Levels `first..=last` (at most the variant's last) from the pruned

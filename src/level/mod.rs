@@ -10,6 +10,7 @@ pub mod height_field;
 pub mod repair;
 pub mod seen_through;
 pub mod structure;
+pub mod warp;
 
 use glam::{DVec3, IVec3, Vec3};
 use rayon::prelude::*;

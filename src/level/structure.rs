@@ -684,6 +684,23 @@ impl StructureScores {
     pub fn whole(&self) -> bool {
         !self.flags.iter().any(|f| f.broken())
     }
+
+    /// The scores of a shape that started from the exemplar bent
+    /// (`level::warp`): whole against `bent`, the exemplar's same level bent
+    /// the same way (a bend is not a tear, nor out of style), new against
+    /// the exemplar itself (`near_copy`, the copy F-score and the largest
+    /// change are the exemplar's).
+    pub fn against_bend(shape_level: &Level, s: &Structure, bent: (&Level, &Structure), exemplar_level: &Level, p: &StructureParams) -> Self {
+        let mut scores = StructureScores::new(shape_level, s, bent.0, bent.1, p);
+        let matching = Matching::of(shape_level, exemplar_level);
+        scores.copy_fscore = matching.fscore();
+        scores.largest_change = matching.largest_change();
+        scores.flags.retain(|f| *f != Flag::NearCopy);
+        if scores.copy_fscore >= p.copy_fscore && scores.largest_change < p.copy_max_change {
+            scores.flags.push(Flag::NearCopy);
+        }
+        scores
+    }
 }
 
 /// The largest place where shape `a` differs from `b` (same resolution): the

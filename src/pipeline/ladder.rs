@@ -85,9 +85,9 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
                 sample_variants(&m, &levels, &one_pass, None)
             });
             match untrained {
-                Ok(mut v) if v.first().and_then(|l| l.last()).is_some_and(|l| l.len() > 0 && l.index + 1 == levels.len()) => {
+                Ok(mut v) if v.first().and_then(|s| s.levels.last()).is_some_and(|l| l.len() > 0 && l.index + 1 == levels.len()) => {
                     log::info!("ladder: untrained networks sampled in {:.1} s", t.elapsed().as_secs_f64());
-                    rungs.push((Rung::Untrained, v.swap_remove(0)));
+                    rungs.push((Rung::Untrained, v.swap_remove(0).levels));
                 }
                 Ok(_) => skipped.push("untrained: every voxel was pruned before the finest level (nothing to score)".into()),
                 Err(e) => skipped.push(format!("untrained: {e}")),
@@ -114,6 +114,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
             coarsest: l[0].clone(),
             structure: crate::level::structure::structure_level(l).cloned(),
             mesh: None,
+            bend: None,
         })
         .collect();
     let evaluation = crate::eval::evaluate::evaluate(exemplar_dir, None, &files, 256)?;

@@ -180,11 +180,23 @@ pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
         let v = sample_variants(&models, levels, &one, job.from.map(|(l, _)| l.clone()))?;
         let dir = variant_dir(job.variants_dir, i);
         let preview = |level: &Level, path: &Path| super::encode::write_preview(level, &crate::render::preview_options(), path);
-        dataset::write_variant(&dir, &v[0], &provenance, job.previews.then_some(&preview as _), config.output.write_options())?;
+        dataset::write_variant(&dir, &v[0].levels, &provenance, job.previews.then_some(&preview as _), config.output.write_options())?;
+        write_bend(&dir, v[0].bend.as_ref())?;
         mark_done(&dir, StampOf::Sample, &key(i), tv.elapsed().as_secs_f64())?;
     }
     log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
     Ok(dirs)
+}
+
+/// Records a variant's bend beside its levels ([`crate::level::warp::BEND_FILE`],
+/// read by eval), or removes a stale record where it has none.
+fn write_bend(dir: &Path, bend: Option<&crate::level::warp::Bend>) -> Result<()> {
+    let path = dir.join(crate::level::warp::BEND_FILE);
+    match bend {
+        Some(b) => crate::util::fs::write_file(&path, serde_json::to_string_pretty(b).expect("a bend serialises").as_bytes()),
+        None if path.exists() => std::fs::remove_file(&path).map_err(|e| Error::file(&path, e.to_string())),
+        None => Ok(()),
+    }
 }
 
 /// The `sample` command: variants of the encoded exemplar in `exemplar_dir`
@@ -243,13 +255,14 @@ pub fn models_needed(config: &Config, exemplar_levels: &[Level], stop_level: Opt
 /// ([`sample::sample`]), those of `transfer.from_resolution` and finer by detail transfer
 /// ([`transfer::extend`]), up to `opts.stop_level`. With `from` (a level k),
 /// levels k+1 .. are produced from it. Returns, per variant, its levels
-/// coarsest first (`from` itself not included).
+/// coarsest first (`from` itself not included) and its bend, where its start
+/// was the exemplar bent.
 pub fn sample_variants(
     models: &sample::Models,
     exemplar_levels: &[Level],
     opts: &SampleOptions,
     from: Option<Level>,
-) -> Result<Vec<Vec<Level>>> {
+) -> Result<Vec<sample::SampledVariant>> {
     let count = exemplar_levels.len();
     let last = opts.stop_level.unwrap_or(count.saturating_sub(1));
     if last >= count {
@@ -271,14 +284,16 @@ pub fn sample_variants(
     }
     let mut variants = match &from {
         // Continuing from a level at or past the networks' last: transfer only.
-        Some(level) if level.index >= diffusion_last && level.index < last => vec![Vec::new(); opts.n],
+        Some(level) if level.index >= diffusion_last && level.index < last => {
+            vec![sample::SampledVariant { levels: Vec::new(), bend: None }; opts.n]
+        }
         _ => sample::sample(models, exemplar_levels, &SampleOptions { stop_level: Some(diffusion_last), ..opts.clone() }, from.clone())?,
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
         let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
         let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
-        for (i, v) in variants.iter_mut().enumerate() {
+        for (i, v) in variants.iter_mut().map(|v| &mut v.levels).enumerate() {
             let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
             let seed = sample::variant_seed(opts.seed, opts.first + i);
             let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, seed, &repairs)?;

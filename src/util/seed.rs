@@ -28,6 +28,9 @@ pub enum Stream {
     TrainingNoise = 11,
     /// The seed of one more coarse-to-fine attempt of a variant.
     StructureAttempt = 12,
+    /// The bend of one attempt of a variant that starts from the exemplar
+    /// bent (`level::warp`).
+    Bend = 13,
 }
 
 /// SplitMix64 of the tuple (seed, index, stream, step): `index` is the level

@@ -115,6 +115,11 @@ pub struct ShapeInput<'a> {
     /// The level the structure is measured at (64^3, or the finest level
     /// below it), if any.
     pub structure_level: Option<&'a Level>,
+    /// For a variant that started from the exemplar bent: the exemplar's
+    /// structure level bent the same way, which its structure is judged
+    /// against (new is still judged against the exemplar:
+    /// [`StructureScores::against_bend`]).
+    pub bent_reference: Option<&'a Level>,
 }
 
 /// What makes a voxelisation unusable for comparison, with the shape's name.
@@ -196,8 +201,11 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
             coverage_22: cover_22.summary(lp.threshold),
             detail: DetailScores::new(&Variation::of(v.finest), &ex_detail),
             colour: colourful.then(|| colour::colour_scores(&ColourPatches::of(v.finest), &ex_colour, &params.colour)),
-            structure: match (&ex_structure, v.structure_level) {
-                (Some((el, es)), Some(vl)) if vl.resolution == el.resolution => {
+            structure: match (&ex_structure, v.structure_level, v.bent_reference) {
+                (Some((el, _)), Some(vl), Some(bent)) if vl.resolution == el.resolution && bent.resolution == el.resolution => {
+                    Some(StructureScores::against_bend(vl, &Structure::of(vl), (bent, &Structure::of(bent)), el, &params.structure))
+                }
+                (Some((el, es)), Some(vl), _) if vl.resolution == el.resolution => {
                     Some(StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure))
                 }
                 _ => None,
@@ -444,7 +452,7 @@ mod tests {
         let shifted = vec![Vec3::new(0.0, 0.1, 0.0), Vec3::new(1.0, 0.1, 0.0)];
         let (exh, v1h, parth) = (halve(&ex), halve(&v1), halve(&part));
         let (lex, lv1, lpart) = (level_of(&ex), level_of(&v1), level_of(&part));
-        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None };
+        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None, bent_reference: None };
         let r = evaluate(
             &shape("exemplar", &ex, &exh, &lex, Some(&pts)),
             &[
@@ -477,13 +485,13 @@ mod tests {
         let full = Occupancy { bits: full.bits.iter().map(|&w| w & last_word_mask(16)).collect(), ..full };
         let empty = Occupancy::empty(ex.dims);
         let l = level_of(&ex);
-        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None };
+        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None, bent_reference: None };
         assert!(matches!(check_shape(&shape(&empty)), Err(DegenerateShape::NoSurface(_))));
         let e = check_shape(&shape(&full)).unwrap_err();
         assert!(matches!(e, DegenerateShape::Filled(..)) && e.to_string().contains("fills 100%"), "{e}");
         assert!(check_shape(&shape(&ex)).is_ok());
         let empty_level = Level { resolution: 16, ..Default::default() };
-        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None };
+        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None, bent_reference: None };
         assert!(matches!(check_shape(&s), Err(DegenerateShape::EmptyLevel(_))));
     }
 }
