@@ -351,14 +351,15 @@ pub struct SampleConfig {
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub remove_specks: bool,
     /// With `level0_pick = novel`: where none of a pass's level-0
-    /// candidates is new enough, the pass starts instead from the
-    /// exemplar bent at random (`level::warp`), each field of the bend moving
-    /// its part by up to this many level-0 voxels; the networks make the
-    /// finer levels (0: never; the candidate least like the exemplar is
-    /// kept). A level-0 network that learned one figure with nothing repeated
-    /// in it (a bunny) offers only the figure again or the figure with a
-    /// part lost; a bent copy is a new pose of the whole figure. Not written
-    /// when 0.
+    /// candidates is new enough, the pass is instead the exemplar bent at
+    /// random (`level::warp`), each field of the bend moving its part by up
+    /// to this many level-0 voxels, at every level (the finer levels'
+    /// detail is transferred from the exemplar bent the same way); 0: never,
+    /// the candidate least like the exemplar is kept. For a figure with
+    /// nothing repeated in it (a bunny, a statue), whose level-0 network
+    /// offers only the figure again or the figure with a part lost: a bent
+    /// exemplar is a new pose of the whole figure. Off in the profiles: a
+    /// bent wall is not a ruin's style. Not written when 0.
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub bend_voxels: f64,
 }

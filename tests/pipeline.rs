@@ -375,9 +375,8 @@ fn level0_rejection_keeps_the_best_candidate() {
 }
 
 /// Where no level-0 candidate is new enough (here: an untrained network,
-/// whose draws pass nothing), a pass starts from the exemplar bent: its
-/// levels up to the bent one are the exemplar's bent by the recorded bend,
-/// the finer ones the networks'. Without `bend_voxels`, never.
+/// whose draws pass nothing), a pass is the exemplar bent: every level is
+/// the exemplar's bent by the recorded bend. Without `bend_voxels`, never.
 #[test]
 fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     use std::collections::HashSet;
@@ -391,7 +390,7 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     for v in &bent {
         let bend = v.bend.expect("nothing new enough: the exemplar bent");
         assert_eq!(v.levels.len(), 3);
-        for l in 0..=shapeshifter::level::warp::BEND_LEVEL {
+        for l in 0..3 {
             assert_eq!(set(&v.levels[l]), set(&bend.bent(&levels, l)), "level {l} is not the exemplar bent");
         }
         assert_ne!(set(&v.levels[1]), set(&levels[1]), "the bend moved nothing");
@@ -402,6 +401,29 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     let off = SampleOptions { bend_voxels: 0.0, ..opts.clone() };
     let plain = shapeshifter::learn::sample::sample(&models, &levels, &off, None).unwrap();
     assert!(plain.iter().all(|v| v.bend.is_none()), "bent without bend_voxels");
+
+    // With the finer levels transferred, a bent variant's detail comes from
+    // the exemplar bent the same way: its finest level is close to that,
+    // and further from the exemplar itself.
+    let transfer = tiny(&[
+        "sample.bend_voxels=1.5",
+        "sample.remove_specks=false",
+        "sample.mend_sheets=false",
+        "encode.sampling_resolution=64",
+        "encode.coarsest_resolution=8",
+        "encode.finest_resolution=32",
+        "transfer.from_resolution=16",
+    ]);
+    let one = shapeshifter::learn::sample::untrained_models(&transfer, 1, Device::Cpu, 3).unwrap();
+    let v = shapeshifter::pipeline::sample_variants(&one, &levels, &SampleOptions::from_config(&transfer, 1, 5), None).unwrap();
+    let bend = v[0].bend.expect("bent");
+    let iou = |a: &Level, b: &Level| {
+        let (a, b) = (set(a), set(b));
+        a.intersection(&b).count() as f64 / a.union(&b).count() as f64
+    };
+    let finest = &v[0].levels[2];
+    let (to_bent, to_exemplar) = (iou(finest, &bend.bent(&levels, 2)), iou(finest, &levels[2]));
+    assert!(to_bent > 0.8 && to_bent > to_exemplar + 0.1, "finest level: IoU {to_bent:.3} with the bent exemplar, {to_exemplar:.3} with the exemplar");
 }
 
 /// Weights whose recorded parameterisation is not this program's (or was

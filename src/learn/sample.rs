@@ -18,7 +18,11 @@
 //!    (64^3): the faults that level 0 cannot show yet (a
 //!    wall that breaks at 32^3) are caught where they appear; with
 //!    `reject_copies`, until it is whole and not a near copy of the exemplar
-//!    there (a whole copy is kept before a broken shape).
+//!    there (a whole copy is kept before a broken shape). With `bend_voxels`
+//!    > 0, a pass whose level-0 candidates are none new enough is instead the
+//!    exemplar bent at random, every level ([`crate::level::warp`]), judged
+//!    whole against the exemplar bent the same way and new against the
+//!    exemplar; the variant's bend is returned with its levels.
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
 //!    process from there with `upper_steps` steps; prune.
@@ -55,7 +59,7 @@ use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
-use crate::level::warp::{Bend, BEND_LEVEL};
+use crate::level::warp::Bend;
 use crate::util::seed::{derive_seed, Stream};
 
 /// The trained networks of every level, read from a training folder.
@@ -697,14 +701,9 @@ impl OneVariant<'_> {
     }
 
     /// Whether a pass may start from the exemplar bent: asked for, with the
-    /// novel pick, the exemplar's box, and a network above the bent level
-    /// to make the next one.
+    /// novel pick, in the exemplar's box.
     fn bends(&self, opts: &SampleOptions) -> bool {
-        opts.bend_voxels > 0.0
-            && opts.level0_pick == crate::config::Level0Pick::Novel
-            && opts.extent == [1.0; 3]
-            && self.exemplar_levels.len() > BEND_LEVEL + 1
-            && self.models.levels() > BEND_LEVEL + 1
+        opts.bend_voxels > 0.0 && opts.level0_pick == crate::config::Level0Pick::Novel && opts.extent == [1.0; 3]
     }
 
     /// The thin-part voxels of level-0 candidate `x` taken to level 1 by the
@@ -810,10 +809,11 @@ impl OneVariant<'_> {
                     (pruned, 1)
                 }
                 Start::Bent(b) => {
-                    // The exemplar's levels up to the bent one, bent; each
-                    // through the tensor, so its rows are in the grid's order.
+                    // Every level the networks would make is the exemplar's,
+                    // bent; each through the tensor, so its rows are in the
+                    // grid's order.
                     let mut cur = None;
-                    for l in 0..=BEND_LEVEL.min(last).min(self.last) {
+                    for l in 0..=last.min(self.last) {
                         let bent = b.bent(self.exemplar_levels, l);
                         let pruned = SparseTensor::from_level(&bent, self.models.device)?.prune_by_mask()?;
                         let level = pruned.to_level(l, self.frame)?;

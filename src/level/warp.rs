@@ -1,10 +1,13 @@
-//! A smooth random bend of a level: the exemplar's coarse shape deformed into
-//! a new one, for the level-0 network to denoise into a shape of its own
-//! where its own draws offer nothing new (docs/results.md, "A bent start at
-//! level 0"). A level-0 network that learned one figure with nothing repeated
-//! in it (a bunny) draws that figure again or loses a part of it; a bent copy
-//! is a new pose of the whole figure, and the finer networks give it the
-//! exemplar's local detail.
+//! A smooth random bend of a level: the exemplar deformed into a new pose,
+//! the variant sampling makes where the networks offer nothing new
+//! (`sample.bend_voxels`; docs/results.md, "Bent starts"). A level-0 network
+//! that learned one figure with nothing repeated in it (a bunny) draws that
+//! figure again or loses a part of it; a bent exemplar is a new pose of the
+//! whole figure with its own detail and colours. Tried and not kept: the
+//! level-0 network denoising a bent level 0 (from t = 0.2 or 0.4 it broke
+//! the shape or drew the exemplar again), and the networks of 32^3 and 64^3
+//! refining a bent coarse level (they tore ears and left flakes the bent
+//! exemplar does not have).
 //!
 //! The bend is a sum of a few Gaussian displacement fields in voxel units of
 //! the level, each centred in the level's bounding box. The level is
@@ -15,6 +18,7 @@
 //! moved points).
 
 use glam::{IVec3, Mat3, Vec3};
+use rayon::prelude::*;
 
 use super::Level;
 use crate::util::rng::Rng;
@@ -110,51 +114,44 @@ impl Warp {
     /// dropped; the result is in coordinate order.
     pub fn apply(&self, level: &Level) -> Level {
         let res = level.resolution as i32;
-        let mut cells: std::collections::BTreeMap<[i32; 3], Splat> = std::collections::BTreeMap::new();
-        for i in 0..level.len() {
-            let s = surface_point(level, i);
-            let n = level.normals[i].normalize_or_zero();
-            let (t1, t2) = n.any_orthonormal_pair();
-            for a in 0..SPLAT_SIDE {
-                for b in 0..SPLAT_SIDE {
-                    let u = SPLAT_REACH * (2.0 * a as f32 / (SPLAT_SIDE - 1) as f32 - 1.0);
-                    let v = SPLAT_REACH * (2.0 * b as f32 / (SPLAT_SIDE - 1) as f32 - 1.0);
-                    let p = s + t1 * u + t2 * v;
+        // Every splat as (its voxel, its place in the level's order, moved
+        // point, turned normal, colour), sorted by voxel then place and
+        // summed per voxel: parallel, and the same sums in the same order
+        // whatever the thread count.
+        let mut splats: Vec<(IVec3, usize, Vec3, Vec3, Vec3)> = (0..level.len())
+            .into_par_iter()
+            .flat_map_iter(|i| {
+                let s = surface_point(level, i);
+                let n = level.normals[i].normalize_or_zero();
+                let (t1, t2) = n.any_orthonormal_pair();
+                let colour = level.colours[i];
+                (0..SPLAT_SIDE * SPLAT_SIDE).filter_map(move |ab| {
+                    let along = |k: usize| SPLAT_REACH * (2.0 * k as f32 / (SPLAT_SIDE - 1) as f32 - 1.0);
+                    let p = s + t1 * along(ab / SPLAT_SIDE) + t2 * along(ab % SPLAT_SIDE);
                     let moved = p + self.displacement(p);
-                    let turned = self.jacobian(p).inverse().transpose() * n;
+                    let turned = (self.jacobian(p).inverse().transpose() * n).normalize_or_zero();
                     let cell = moved.floor().as_ivec3();
-                    if cell.cmplt(IVec3::ZERO).any() || cell.cmpge(IVec3::splat(res)).any() {
-                        continue;
-                    }
-                    let e = cells.entry(cell.to_array()).or_default();
-                    e.point += moved;
-                    e.normal += turned.normalize_or_zero();
-                    e.colour += level.colours[i];
-                    e.count += 1;
-                }
-            }
-        }
+                    let outside = cell.cmplt(IVec3::ZERO).any() || cell.cmpge(IVec3::splat(res)).any();
+                    (!outside).then_some((cell, i * SPLAT_SIDE * SPLAT_SIDE + ab, moved, turned, colour))
+                })
+            })
+            .collect();
+        splats.par_sort_unstable_by_key(|&(c, order, ..)| (c.x, c.y, c.z, order));
         let mut out = Level { index: level.index, resolution: level.resolution, frame: level.frame, ..Default::default() };
-        for (cell, s) in cells {
-            let c = IVec3::from_array(cell);
-            let k = s.count as f32;
+        for run in splats.chunk_by(|a, b| a.0 == b.0) {
+            let c = run[0].0;
+            let k = run.len() as f32;
+            let (point, normal, colour) =
+                run.iter().fold((Vec3::ZERO, Vec3::ZERO, Vec3::ZERO), |(p, n, col), s| (p + s.2, n + s.3, col + s.4));
             out.coords.push(c);
-            out.offsets.push((s.point / k - c.as_vec3() - Vec3::splat(0.5)).clamp(Vec3::splat(-0.5), Vec3::splat(0.5)));
-            out.normals.push(s.normal.try_normalize().unwrap_or(Vec3::Z));
-            out.colours.push(s.colour / k);
+            out.offsets.push((point / k - c.as_vec3() - Vec3::splat(0.5)).clamp(Vec3::splat(-0.5), Vec3::splat(0.5)));
+            out.normals.push(normal.try_normalize().unwrap_or(Vec3::Z));
+            out.colours.push(colour / k);
             out.mask.push(1.0);
         }
         out
     }
 }
-
-/// The level a bent start is bent at: 32^3 at the shipped profiles. The
-/// exemplar's level 0 is bent too (every level is a result), and the
-/// networks make the levels above this one. Bent at 16^3, the level-1 and
-/// level-2 networks tore 5 of 6 bunnies at 64^3 (free-boundary share
-/// 0.013-0.022 against the bent exemplar's 0.006-0.009); bent at 32^3, level
-/// 2's network kept 4 of 6 whole (docs/results.md, "Bent starts").
-pub const BEND_LEVEL: usize = 1;
 
 /// Where a variant that started from a bent exemplar records its bend,
 /// beside its level files: eval judges its structure against the exemplar
@@ -183,14 +180,6 @@ impl Bend {
     pub fn bent(&self, levels: &[Level], index: usize) -> Level {
         self.warp_at(levels, index).apply(&levels[index])
     }
-}
-
-#[derive(Default)]
-struct Splat {
-    point: Vec3,
-    normal: Vec3,
-    colour: Vec3,
-    count: u32,
 }
 
 /// Surface point of voxel `i` in voxel units (the voxel spans [c, c + 1)).

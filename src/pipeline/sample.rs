@@ -293,11 +293,19 @@ pub fn sample_variants(
         let config = &models.config.transfer;
         let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
         let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
-        for (i, v) in variants.iter_mut().map(|v| &mut v.levels).enumerate() {
-            let coarse = v.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
+        for (i, v) in variants.iter_mut().enumerate() {
+            let coarse = v.levels.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;
             let seed = sample::variant_seed(opts.seed, opts.first + i);
-            let finer = crate::transfer::extend(exemplar_levels, coarse, last, config, seed, &repairs)?;
-            v.extend(finer);
+            // A bent variant takes its detail from the exemplar bent the
+            // same way: the exemplar's own patches, turned by the bend,
+            // fit the bent surface where the unbent ones leave facets and
+            // flakes (docs/results.md, "Bent starts").
+            let bent_source: Option<Vec<Level>> = v.bend.map(|b| {
+                exemplar_levels.iter().map(|l| if l.index >= coarse.index { b.bent(exemplar_levels, l.index) } else { l.clone() }).collect()
+            });
+            let source = bent_source.as_deref().unwrap_or(exemplar_levels);
+            let finer = crate::transfer::extend(source, coarse, last, config, seed, &repairs)?;
+            v.levels.extend(finer);
         }
     }
     Ok(variants)

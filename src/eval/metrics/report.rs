@@ -45,6 +45,11 @@ pub struct VariantScores {
     /// exemplar's, with its flags; None when not measured.
     #[serde(default)]
     pub structure: Option<StructureScores>,
+    /// Whether the variant started from the exemplar bent, so its structure
+    /// is judged against the exemplar bent the same way (and new against
+    /// the exemplar itself). Not written when false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub bent: bool,
     /// Chamfer distance of the level-0 point set to the exemplar's, normalised
     /// units (bounding-box diagonal 2); None when not measured.
     pub coarse_chamfer: Option<f64>,
@@ -210,6 +215,7 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
                 }
                 _ => None,
             },
+            bent: v.bent_reference.is_some(),
             coarse_chamfer: cd,
         });
         cover_sets = Some(match cover_sets {
@@ -313,9 +319,12 @@ impl EvalReport {
         let row = |v: &VariantScores| {
             let cd = v.coarse_chamfer.map_or("-".to_string(), |c| format!("{c:.4}"));
             let colour = |f: fn(&ColourScores) -> f64| v.colour.as_ref().map_or("n/a".to_string(), |c| format!("{:.3}", f(c)));
-            let (score, flags) = v.structure.as_ref().map_or(("-".to_string(), String::new()), |s| {
+            let (score, mut flags) = v.structure.as_ref().map_or(("-".to_string(), String::new()), |s| {
                 (format!("{:.3}", s.score), s.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(","))
             });
+            if v.bent {
+                flags = if flags.is_empty() { "(bent)".into() } else { format!("{flags} (bent)") };
+            }
             format!(
                 "{:<width$}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.2}  {:>7.3}  {:>7}  {:>7}  {:>9}  {:>6}  {}\n",
                 v.name,
@@ -363,6 +372,9 @@ impl EvalReport {
         s += "colour: colour patches matched both ways (F-score, coverage; n/a: a one-colour exemplar); chamfer0: level-0 points,\n";
         s += "normalised units; struct: the shape as a whole vs the exemplar at the structure level (1 = its structure),\n";
         s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed, out_of_style (not whole), near_copy\n";
+        if self.variants.iter().any(|v| v.bent) {
+            s += "(bent): started from the exemplar bent; whole is judged against the exemplar bent the same way, near_copy against the exemplar\n";
+        }
         s
     }
 }
@@ -382,6 +394,7 @@ impl VariantScores {
             detail: DetailScores { w1_deg: 0.0, rms_ratio: 0.0, mean_deg: 0.0, rms_deg: 0.0, sharp_fraction: 0.0 },
             colour: None,
             structure: None,
+            bent: false,
             coarse_chamfer: None,
         }
     }
