@@ -763,7 +763,7 @@ impl OneVariant<'_> {
                     None => StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, &params),
                     Some(b) => {
                         let bent = b.bent(self.exemplar_levels, ex_level.index);
-                        StructureScores::against_bend(level, &Structure::of(level), (&bent, &Structure::of(&bent)), ex_level, &params)
+                        StructureScores::against_bend(level, &Structure::of(level), (&bent, &Structure::of(&bent)), ex_level, ex_structure, &params)
                     }
                 };
                 log::debug!("attempt {a}{}: structure {:.3} {:?}", if bend.is_some() { " (bent)" } else { "" }, s.score, s.flags);

@@ -595,6 +595,21 @@ impl StructureScores {
     /// holes (the limit / the hole columns, at most 1: below 1 exactly when flagged);
     /// out of style (the limit / the unlike share, at most 1: below 1 exactly when flagged).
     pub fn new(shape_level: &Level, s: &Structure, exemplar_level: &Level, e: &Structure, p: &StructureParams) -> Self {
+        Self::with_pose(shape_level, s, exemplar_level, e, (exemplar_level, e), p)
+    }
+
+    /// [`StructureScores::new`] with the terms that depend on how the
+    /// surface is turned, the inside seen from fixed views and the
+    /// out-of-style patches, measured against `pose` (a level of the
+    /// exemplar's resolution and its structure) instead of the exemplar.
+    fn with_pose(
+        shape_level: &Level,
+        s: &Structure,
+        exemplar_level: &Level,
+        e: &Structure,
+        pose: (&Level, &Structure),
+        p: &StructureParams,
+    ) -> Self {
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
         let sym = |r: f64| if r > 0.0 { r.min(1.0 / r) } else { 0.0 };
         let mass_ratio = ratio(s.voxels as f64, e.voxels as f64);
@@ -602,7 +617,7 @@ impl StructureScores {
         let extent_ratio = axis_ratios.iter().copied().fold(f64::INFINITY, f64::min);
         let (fb, efb) = (s.free_boundary_share(), e.free_boundary_share());
         let enclosure_ratio = ratio(s.enclosure, e.enclosure);
-        let seen_through_excess = super::seen_through::seen_through_excess(&s.seen_through, &e.seen_through);
+        let seen_through_excess = super::seen_through::seen_through_excess(&s.seen_through, &pose.1.seen_through);
         let thin_ratio = if e.thin as f64 >= p.min_exemplar_thin_share * e.voxels as f64 && e.thin > 0 {
             s.thin as f64 / e.thin as f64
         } else {
@@ -611,7 +626,7 @@ impl StructureScores {
         let sheet_axis = e.sheet_axis;
         let hole_columns = sheet_axis.map_or(0, |a| s.enclosed_columns[a]);
         let hole_limit = p.max_hole_share * e.voxels as f64;
-        let unlike_share = unlike_share(shape_level, exemplar_level);
+        let unlike_share = unlike_share(shape_level, pose.0);
         let terms = [
             sym(mass_ratio),
             axis_ratios.iter().map(|&r| sym(r)).fold(1.0, f64::min),
@@ -685,21 +700,23 @@ impl StructureScores {
         !self.flags.iter().any(|f| f.broken())
     }
 
-    /// The scores of a shape that started from the exemplar bent
-    /// (`level::warp`): whole against `bent`, the exemplar's same level bent
-    /// the same way (a bend is not a tear, nor out of style), new against
-    /// the exemplar itself (`near_copy`, the copy F-score and the largest
-    /// change are the exemplar's).
-    pub fn against_bend(shape_level: &Level, s: &Structure, bent: (&Level, &Structure), exemplar_level: &Level, p: &StructureParams) -> Self {
-        let mut scores = StructureScores::new(shape_level, s, bent.0, bent.1, p);
-        let matching = Matching::of(shape_level, exemplar_level);
-        scores.copy_fscore = matching.fscore();
-        scores.largest_change = matching.largest_change();
-        scores.flags.retain(|f| *f != Flag::NearCopy);
-        if scores.copy_fscore >= p.copy_fscore && scores.largest_change < p.copy_max_change {
-            scores.flags.push(Flag::NearCopy);
-        }
-        scores
+    /// The scores of a shape that is the exemplar bent (`level::warp`):
+    /// against the exemplar, but for the inside seen from fixed views and the
+    /// out-of-style patches, which are measured against `bent`, the
+    /// exemplar's same level bent the same way (a turned surface shows other
+    /// views and matches no unturned patch, and is neither torn nor out of
+    /// style). So a bend that merges an ear into the head, stretches a thin
+    /// part away or splits the surface is still flagged, and `near_copy` says
+    /// whether the bend made anything new.
+    pub fn against_bend(
+        shape_level: &Level,
+        s: &Structure,
+        bent: (&Level, &Structure),
+        exemplar_level: &Level,
+        e: &Structure,
+        p: &StructureParams,
+    ) -> Self {
+        Self::with_pose(shape_level, s, exemplar_level, e, bent, p)
     }
 }
 

@@ -10,12 +10,13 @@
 //! exemplar does not have).
 //!
 //! The bend is a sum of a few Gaussian displacement fields in voxel units of
-//! the level, each centred in the level's bounding box. The level is
+//! the level, each centred at one of its surface points. The level is
 //! resampled by splatting: every voxel's surface point and a small grid of
 //! points on its tangent plane are moved, their normals turned by the
 //! inverse transpose of the bend's Jacobian, and each target voxel takes the
-//! mean of what lands in it (so a stretch does not open gaps between the
-//! moved points).
+//! mean point and normal of what lands in it (so a stretch does not open
+//! gaps between the moved points) and the colour of the point nearest a
+//! voxel's own surface point (a texture's edges stay sharp).
 
 use glam::{IVec3, Mat3, Vec3};
 use rayon::prelude::*;
@@ -115,10 +116,11 @@ impl Warp {
     pub fn apply(&self, level: &Level) -> Level {
         let res = level.resolution as i32;
         // Every splat as (its voxel, its place in the level's order, moved
-        // point, turned normal, colour), sorted by voxel then place and
-        // summed per voxel: parallel, and the same sums in the same order
-        // whatever the thread count.
-        let mut splats: Vec<(IVec3, usize, Vec3, Vec3, Vec3)> = (0..level.len())
+        // point, turned normal, squared distance from its surface point,
+        // colour), sorted by voxel then place and summed per voxel:
+        // parallel, and the same sums in the same order whatever the thread
+        // count.
+        let mut splats: Vec<(IVec3, usize, Vec3, Vec3, f32, Vec3)> = (0..level.len())
             .into_par_iter()
             .flat_map_iter(|i| {
                 let s = surface_point(level, i);
@@ -127,12 +129,13 @@ impl Warp {
                 let colour = level.colours[i];
                 (0..SPLAT_SIDE * SPLAT_SIDE).filter_map(move |ab| {
                     let along = |k: usize| SPLAT_REACH * (2.0 * k as f32 / (SPLAT_SIDE - 1) as f32 - 1.0);
-                    let p = s + t1 * along(ab / SPLAT_SIDE) + t2 * along(ab % SPLAT_SIDE);
+                    let (u, v) = (along(ab / SPLAT_SIDE), along(ab % SPLAT_SIDE));
+                    let p = s + t1 * u + t2 * v;
                     let moved = p + self.displacement(p);
                     let turned = (self.jacobian(p).inverse().transpose() * n).normalize_or_zero();
                     let cell = moved.floor().as_ivec3();
                     let outside = cell.cmplt(IVec3::ZERO).any() || cell.cmpge(IVec3::splat(res)).any();
-                    (!outside).then_some((cell, i * SPLAT_SIDE * SPLAT_SIDE + ab, moved, turned, colour))
+                    (!outside).then_some((cell, i * SPLAT_SIDE * SPLAT_SIDE + ab, moved, turned, u * u + v * v, colour))
                 })
             })
             .collect();
@@ -141,12 +144,14 @@ impl Warp {
         for run in splats.chunk_by(|a, b| a.0 == b.0) {
             let c = run[0].0;
             let k = run.len() as f32;
-            let (point, normal, colour) =
-                run.iter().fold((Vec3::ZERO, Vec3::ZERO, Vec3::ZERO), |(p, n, col), s| (p + s.2, n + s.3, col + s.4));
+            let (point, normal) = run.iter().fold((Vec3::ZERO, Vec3::ZERO), |(p, n), s| (p + s.2, n + s.3));
+            // The colour of the splat nearest its own surface point (the
+            // first of equals), not a mean: a mean blurs a texture's edges.
+            let colour = run.iter().fold((f32::INFINITY, Vec3::ZERO), |best, s| if s.4 < best.0 { (s.4, s.5) } else { best }).1;
             out.coords.push(c);
             out.offsets.push((point / k - c.as_vec3() - Vec3::splat(0.5)).clamp(Vec3::splat(-0.5), Vec3::splat(0.5)));
             out.normals.push(normal.try_normalize().unwrap_or(Vec3::Z));
-            out.colours.push(colour / k);
+            out.colours.push(colour);
             out.mask.push(1.0);
         }
         out
@@ -200,7 +205,7 @@ fn bounds(level: &Level) -> (Vec3, Vec3) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::level::structure::{Structure, StructureParams, StructureScores};
+    use crate::level::structure::{Flag, Structure, StructureParams, StructureScores};
     use crate::testing::synthetic::sphere_levels;
 
     fn ball() -> Level {
@@ -243,20 +248,27 @@ mod tests {
     }
 
     #[test]
-    fn a_bent_shape_is_judged_whole_against_the_bent_exemplar_and_new_against_the_exemplar() {
+    fn a_bent_shape_is_judged_against_the_exemplar_but_for_its_views_and_patches() {
         let ball = ball();
         // A third of the ball's diameter: a smaller bend of a smooth ball
         // stays within the copy flag's 1-voxel tolerance almost everywhere.
         let bent = Warp::random(&ball, 6.0, 7).apply(&ball);
         let params = StructureParams::default();
         let (sb, se) = (Structure::of(&bent), Structure::of(&ball));
-        // The bent ball against the ball: moved, so new.
-        let s = StructureScores::against_bend(&bent, &sb, (&bent, &sb), &ball, &params);
-        assert!(s.whole() && !s.flags.contains(&crate::level::structure::Flag::NearCopy), "{:?}", s.flags);
+        // The bent ball against the ball: moved, so new, and whole.
+        let s = StructureScores::against_bend(&bent, &sb, (&bent, &sb), &ball, &se, &params);
+        assert!(s.whole() && !s.flags.contains(&Flag::NearCopy), "{:?}", s.flags);
         assert!(s.copy_fscore < 0.95, "copy F {}", s.copy_fscore);
-        // The ball itself, started from that bend: a copy of the exemplar.
-        let c = StructureScores::against_bend(&ball, &se, (&bent, &sb), &ball, &params);
-        assert!(c.flags.contains(&crate::level::structure::Flag::NearCopy), "{:?}", c.flags);
+        // The ball itself, with that bend: a copy of the exemplar.
+        let c = StructureScores::against_bend(&ball, &se, (&bent, &sb), &ball, &se, &params);
+        assert!(c.flags.contains(&Flag::NearCopy), "{:?}", c.flags);
+        // Half of the bent ball: a fragment against the exemplar, whatever
+        // the bend's own views say.
+        let mut half = bent.clone();
+        let mid = bent.coords.iter().map(|c| c.x).sum::<i32>() / bent.len() as i32;
+        half.retain(|i| bent.coords[i].x < mid);
+        let h = StructureScores::against_bend(&half, &Structure::of(&half), (&bent, &sb), &ball, &se, &params);
+        assert!(h.flags.contains(&Flag::Fragment) && !h.whole(), "{:?}", h.flags);
     }
 
     #[test]

@@ -45,9 +45,9 @@ pub struct VariantScores {
     /// exemplar's, with its flags; None when not measured.
     #[serde(default)]
     pub structure: Option<StructureScores>,
-    /// Whether the variant started from the exemplar bent, so its structure
-    /// is judged against the exemplar bent the same way (and new against
-    /// the exemplar itself). Not written when false.
+    /// Whether the variant is the exemplar bent, so the views of its inside
+    /// and its out-of-style patches are judged against the exemplar bent the
+    /// same way ([`StructureScores::against_bend`]). Not written when false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub bent: bool,
     /// Chamfer distance of the level-0 point set to the exemplar's, normalised
@@ -120,10 +120,10 @@ pub struct ShapeInput<'a> {
     /// The level the structure is measured at (64^3, or the finest level
     /// below it), if any.
     pub structure_level: Option<&'a Level>,
-    /// For a variant that started from the exemplar bent: the exemplar's
-    /// structure level bent the same way, which its structure is judged
-    /// against (new is still judged against the exemplar:
-    /// [`StructureScores::against_bend`]).
+    /// For a variant that is the exemplar bent: the exemplar's structure
+    /// level bent the same way, which the views of its inside and its
+    /// out-of-style patches are judged against
+    /// ([`StructureScores::against_bend`]).
     pub bent_reference: Option<&'a Level>,
 }
 
@@ -207,8 +207,8 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
             detail: DetailScores::new(&Variation::of(v.finest), &ex_detail),
             colour: colourful.then(|| colour::colour_scores(&ColourPatches::of(v.finest), &ex_colour, &params.colour)),
             structure: match (&ex_structure, v.structure_level, v.bent_reference) {
-                (Some((el, _)), Some(vl), Some(bent)) if vl.resolution == el.resolution && bent.resolution == el.resolution => {
-                    Some(StructureScores::against_bend(vl, &Structure::of(vl), (bent, &Structure::of(bent)), el, &params.structure))
+                (Some((el, es)), Some(vl), Some(bent)) if vl.resolution == el.resolution && bent.resolution == el.resolution => {
+                    Some(StructureScores::against_bend(vl, &Structure::of(vl), (bent, &Structure::of(bent)), el, es, &params.structure))
                 }
                 (Some((el, es)), Some(vl), _) if vl.resolution == el.resolution => {
                     Some(StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure))
@@ -296,7 +296,8 @@ impl EvalReport {
             }
         };
         mean.name = "mean".into();
-        // Flags are per variant: the mean has none.
+        // Flags and the bent mark are per variant: the mean has none.
+        mean.bent = false;
         if let Some(s) = mean.structure.as_mut() {
             s.flags.clear();
         }
@@ -373,7 +374,7 @@ impl EvalReport {
         s += "normalised units; struct: the shape as a whole vs the exemplar at the structure level (1 = its structure),\n";
         s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed, out_of_style (not whole), near_copy\n";
         if self.variants.iter().any(|v| v.bent) {
-            s += "(bent): started from the exemplar bent; whole is judged against the exemplar bent the same way, near_copy against the exemplar\n";
+            s += "(bent): the exemplar bent; seen_through and out_of_style are judged against the exemplar bent the same way\n";
         }
         s
     }
