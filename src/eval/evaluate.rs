@@ -84,14 +84,21 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let mesh_path = dir.join("mesh.ply");
     let mesh = if mesh_path.is_file() { Some(mesh::load(&mesh_path)?) } else { None };
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let bend_path = dir.join(crate::level::warp::BEND_FILE);
-    let bend = if bend_path.is_file() {
-        let text = std::fs::read_to_string(&bend_path).map_err(|e| Error::file(&bend_path, e.to_string()))?;
-        Some(serde_json::from_str(&text).map_err(|e| Error::file(&bend_path, format!("not a bend record: {}", crate::error::one_line(&e.to_string()))))?)
-    } else {
-        None
-    };
+    let bend = read_bend(dir)?;
     Ok(VariantFiles { name, finest, coarsest, structure, mesh, bend })
+}
+
+/// A variant folder's bend record ([`crate::level::warp::BEND_FILE`]), if
+/// it has one; one that does not parse is an error naming the file.
+pub fn read_bend(dir: &Path) -> Result<Option<crate::level::warp::Bend>> {
+    let path = dir.join(crate::level::warp::BEND_FILE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| Error::file(&path, format!("not a bend record: {}", crate::error::one_line(&e.to_string()))))
 }
 
 fn points_normalised(level: &Level) -> Vec<Vec3> {
@@ -299,4 +306,22 @@ pub fn evaluate(
     }
     let report = metrics::evaluate(&exemplar, &inputs, &EvalParams::default())?;
     Ok(Evaluation { lattice: Lattice { voxelisation: mode, filled, dims: grid.dims, voxel: grid.voxel }, unscored, report })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bend_record_is_read_when_there_and_a_broken_one_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(read_bend(dir.path()).unwrap(), None);
+        let bend = crate::level::warp::Bend { seed: 42, voxels: 2.0 };
+        let path = dir.path().join(crate::level::warp::BEND_FILE);
+        std::fs::write(&path, serde_json::to_string(&bend).unwrap()).unwrap();
+        assert_eq!(read_bend(dir.path()).unwrap(), Some(bend));
+        std::fs::write(&path, "{\"seed\": 42").unwrap();
+        let e = read_bend(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("bend.json") && e.contains("not a bend record") && !e.contains('\n'), "{e}");
+    }
 }
