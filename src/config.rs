@@ -350,7 +350,8 @@ pub struct SampleConfig {
     /// transfer's loose flecks. Not written when off.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub remove_specks: bool,
-    /// With `level0_pick = novel`: where none of a pass's level-0
+    /// With `level0_pick = novel`, `level0_candidates` > 1 and the
+    /// exemplar's box (no `--extent`): where none of a pass's level-0
     /// candidates is new enough, the pass is instead the exemplar bent at
     /// random (`level::warp`), each field of the bend moving its part by up
     /// to this many level-0 voxels, at every level (the finer levels'
@@ -631,8 +632,11 @@ impl Config {
         if self.sample.attempts == 0 || self.sample.attempts > 64 {
             return Err(Error::Invalid("sample.attempts must be in 1..=64".into()));
         }
-        if !(0.0..=8.0).contains(&self.sample.bend_voxels) {
-            return Err(Error::Invalid("sample.bend_voxels must be in [0, 8] (level-0 voxels)".into()));
+        if !(0.0..=crate::level::warp::MAX_BEND_VOXELS).contains(&self.sample.bend_voxels) {
+            return Err(Error::Invalid(format!(
+                "sample.bend_voxels must be in [0, {}] (level-0 voxels)",
+                crate::level::warp::MAX_BEND_VOXELS
+            )));
         }
         if !(0.0..=1.0).contains(&self.sample.level0_min_structure) {
             return Err(Error::Invalid("sample.level0_min_structure must be in [0, 1]".into()));

@@ -402,6 +402,15 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     let plain = shapeshifter::learn::sample::sample(&models, &levels, &off, None).unwrap();
     assert!(plain.iter().all(|v| v.bend.is_none()), "bent without bend_voxels");
 
+    // Networks finer than the structure level (64^3), several attempts: the
+    // kept bent pass stays bent past the level the attempts stop at.
+    let deep = sphere_levels(&[8, 16, 32, 64, 128], DVec3::new(0.05, -0.1, 0.0), 0.55);
+    let models5 = shapeshifter::learn::sample::untrained_models(&config, 5, Device::Cpu, 3).unwrap();
+    let v = shapeshifter::learn::sample::sample(&models5, &deep, &SampleOptions { n: 1, ..SampleOptions::from_config(&config, 1, 5) }, None).unwrap();
+    let bend = v[0].bend.expect("bent");
+    assert_eq!(v[0].levels.len(), 5);
+    assert_eq!(set(&v[0].levels[4]), set(&bend.bent(&deep, 4)), "128^3 made by a network after a bent 64^3");
+
     // With the finer levels transferred, a bent variant's detail comes from
     // the exemplar bent the same way: its finest level is close to that,
     // and further from the exemplar itself.

@@ -96,9 +96,12 @@ pub fn read_bend(dir: &Path) -> Result<Option<crate::level::warp::Bend>> {
         return Ok(None);
     }
     let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
-    serde_json::from_str(&text)
-        .map(Some)
-        .map_err(|e| Error::file(&path, format!("not a bend record: {}", crate::error::one_line(&e.to_string()))))
+    let bend: crate::level::warp::Bend = serde_json::from_str(&text)
+        .map_err(|e| Error::file(&path, format!("not a bend record: {}", crate::error::one_line(&e.to_string()))))?;
+    if !(bend.voxels.is_finite() && (0.0..=crate::level::warp::MAX_BEND_VOXELS).contains(&(bend.voxels as f64))) {
+        return Err(Error::file(&path, format!("bend of {} voxels: a bend is 0 to {} level-0 voxels", bend.voxels, crate::level::warp::MAX_BEND_VOXELS)));
+    }
+    Ok(Some(bend))
 }
 
 fn points_normalised(level: &Level) -> Vec<Vec3> {
@@ -323,5 +326,8 @@ mod tests {
         std::fs::write(&path, "{\"seed\": 42").unwrap();
         let e = read_bend(dir.path()).unwrap_err().to_string();
         assert!(e.contains("bend.json") && e.contains("not a bend record") && !e.contains('\n'), "{e}");
+        std::fs::write(&path, "{\"seed\": 42, \"voxels\": 1e38}").unwrap();
+        let e = read_bend(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("bend.json") && e.contains("0 to 4"), "{e}");
     }
 }

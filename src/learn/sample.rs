@@ -19,10 +19,14 @@
 //!    wall that breaks at 32^3) are caught where they appear; with
 //!    `reject_copies`, until it is whole and not a near copy of the exemplar
 //!    there (a whole copy is kept before a broken shape). With `bend_voxels`
-//!    > 0, a pass whose level-0 candidates are none new enough is instead the
-//!    exemplar bent at random, every level ([`crate::level::warp`]), judged
-//!    whole against the exemplar bent the same way and new against the
-//!    exemplar; the variant's bend is returned with its levels.
+//!    > 0 (and the novel pick of more than one candidate, in the exemplar's
+//!    box), a pass whose level-0 candidates are none new enough is instead
+//!    the exemplar bent at random, every level ([`crate::level::warp`]),
+//!    judged against the exemplar except for the inside seen and the
+//!    out-of-style patches, which are judged against the exemplar bent the
+//!    same way ([`StructureScores::against_bend`]); the variant's bend is
+//!    returned with its levels. Continuing from a level of a bent variant
+//!    (`from`) runs the networks: a continuation is not bent.
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
 //!    correction, on the subdivided grid), noised to t = `upper_t_max`, the reverse
 //!    process from there with `upper_steps` steps; prune.
@@ -197,8 +201,11 @@ pub struct SampleOptions {
     pub mend_sheets: bool,
     /// Whether every level loses its specks (`sample.remove_specks`).
     pub remove_specks: bool,
-    /// A pass whose level-0 candidates are none new enough starts from the
-    /// exemplar bent by up to this many level-0 voxels (`sample.bend_voxels`; 0: never).
+    /// A pass whose level-0 candidates are none new enough is instead the
+    /// exemplar bent by up to this many level-0 voxels (`sample.bend_voxels`;
+    /// 0: never). Not written when 0, so the stamps of variants sampled
+    /// before it existed still match.
+    #[serde(skip_serializing_if = "is_zero")]
     pub bend_voxels: f64,
 }
 
@@ -265,6 +272,10 @@ pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
     // keep the centre: shift by half the change (floor division keeps it exact for even changes)
     let new_lo = lo + IVec3::from_array([0, 1, 2].map(|a| (size[a] - new_size[a]).div_euclid(2)));
     Ok((new_lo, new_size))
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// One sampled variant: the pruned level of each stage produced, coarsest
@@ -727,7 +738,8 @@ impl OneVariant<'_> {
     /// not a near copy, then by score). Attempts stop at the structure
     /// level; only the kept one goes on to the finer levels (continuing
     /// from a level reproduces the pass that made it, so the variant is the
-    /// same as if every attempt had gone to the end).
+    /// same as if every attempt had gone to the end; a bent pass goes on
+    /// bent).
     fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<SampledVariant> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
         let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
@@ -737,7 +749,15 @@ impl OneVariant<'_> {
         };
         let (mut levels, cur, bend) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
         let next = levels.len();
-        self.descend(cur, next, self.last, opts, &mut levels)?;
+        match &bend {
+            // A bent pass stays the exemplar bent up to the variant's last level.
+            Some(b) => {
+                self.bent_levels(b, next, self.last, &mut levels)?;
+            }
+            None => {
+                self.descend(cur, next, self.last, opts, &mut levels)?;
+            }
+        }
         Ok(SampledVariant { levels, bend })
     }
 
@@ -809,20 +829,9 @@ impl OneVariant<'_> {
                     (pruned, 1)
                 }
                 Start::Bent(b) => {
-                    // Every level the networks would make is the exemplar's,
-                    // bent; each through the tensor, so its rows are in the
-                    // grid's order.
-                    let mut cur = None;
-                    for l in 0..=last.min(self.last) {
-                        let bent = b.bent(self.exemplar_levels, l);
-                        let pruned = SparseTensor::from_level(&bent, self.models.device)?.prune_by_mask()?;
-                        let level = pruned.to_level(l, self.frame)?;
-                        let (pruned, level) = self.repaired(pruned, level)?;
-                        out.push(level);
-                        cur = Some(pruned);
-                    }
+                    let cur = self.bent_levels(&b, 0, last, &mut out)?.expect("level 0 at least");
                     bend = Some(b);
-                    (cur.expect("level 0 at least"), out.len())
+                    (cur, out.len())
                 }
             },
             Some(level) => {
@@ -832,6 +841,24 @@ impl OneVariant<'_> {
         };
         let cur = self.descend(cur, first, last, opts, &mut out)?;
         Ok((out, cur, bend))
+    }
+
+    /// Levels `first..=last` (at most the variant's last) of the exemplar
+    /// bent by `bend`, appended to `out` (every level a network would make:
+    /// no network runs on a bent pass); each through the tensor, so its rows
+    /// are in the grid's order. The last one's pruned tensor; None when
+    /// there is no level to make.
+    fn bent_levels(&self, bend: &Bend, first: usize, last: usize, out: &mut Vec<Level>) -> Result<Option<SparseTensor>> {
+        let mut cur = None;
+        for l in first..=last.min(self.last) {
+            let bent = bend.bent(self.exemplar_levels, l);
+            let pruned = SparseTensor::from_level(&bent, self.models.device)?.prune_by_mask()?;
+            let level = pruned.to_level(l, self.frame)?;
+            let (pruned, level) = self.repaired(pruned, level)?;
+            out.push(level);
+            cur = Some(pruned);
+        }
+        Ok(cur)
     }
 
     /// Levels `first..=last` (at most the variant's last) from the pruned

@@ -158,6 +158,12 @@ impl Warp {
     }
 }
 
+/// The largest `sample.bend_voxels`, in level-0 voxels. A field folds the
+/// surface over once it moves its centre by about 1.65 of its widths
+/// (sigma, a quarter of the longest side: 4 voxels on a 16-voxel shape),
+/// and the fields add up where they overlap; 2 was measured on the bunny.
+pub const MAX_BEND_VOXELS: f64 = 4.0;
+
 /// Where a variant that started from a bent exemplar records its bend,
 /// beside its level files: eval judges its structure against the exemplar
 /// bent the same way.

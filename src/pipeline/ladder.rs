@@ -81,7 +81,13 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
                 // makes of noise, and the whole-and-new search (16 candidates
                 // and retries at the demo profile) only spent half a minute
                 // finding that every one of them prunes away.
-                let one_pass = SampleOptions { level0_candidates: 1, level0_min_structure: 0.0, attempts: 1, ..SampleOptions::from_config(config, 1, options.seed) };
+                let one_pass = SampleOptions {
+                    level0_candidates: 1,
+                    level0_min_structure: 0.0,
+                    attempts: 1,
+                    bend_voxels: 0.0,
+                    ..SampleOptions::from_config(config, 1, options.seed)
+                };
                 sample_variants(&m, &levels, &one_pass, None)
             });
             match untrained {
