@@ -511,6 +511,12 @@ fn candidate_seed(seed: u64, k: usize) -> u64 {
     }
 }
 
+/// Whether sampling with `opts` could bend a pass, given `bend_voxels`: the
+/// novel pick of more than one level-0 candidate, in the exemplar's box.
+fn could_bend(opts: &SampleOptions) -> bool {
+    opts.level0_pick == crate::config::Level0Pick::Novel && opts.level0_candidates > 1 && opts.extent == [1.0; 3]
+}
+
 /// How a pass starts: a level-0 shape drawn by the network (its pruned
 /// tensor and level), or the exemplar bent.
 enum Start {
@@ -689,7 +695,7 @@ impl OneVariant<'_> {
             }
         }
         let (k, why) = pick.kept().expect("at least one candidate");
-        if !matches!(why, Kept::First | Kept::NewEnough { .. }) && self.bends(opts) {
+        if !matches!(why, Kept::First | Kept::NewEnough { .. }) && opts.bend_voxels > 0.0 && could_bend(opts) {
             let bend = Bend { seed: derive_seed(seed, 0, Stream::Bend, 0), voxels: opts.bend_voxels as f32 };
             log::info!("level 0: none of {candidates} candidates new enough: the exemplar bent instead (seed {})", bend.seed);
             return Ok(Start::Bent(bend));
@@ -711,11 +717,6 @@ impl OneVariant<'_> {
         Ok(Start::Drawn(x, level))
     }
 
-    /// Whether a pass may start from the exemplar bent: asked for, with the
-    /// novel pick, in the exemplar's box.
-    fn bends(&self, opts: &SampleOptions) -> bool {
-        opts.bend_voxels > 0.0 && opts.level0_pick == crate::config::Level0Pick::Novel && opts.extent == [1.0; 3]
-    }
 
     /// The thin-part voxels of level-0 candidate `x` taken to level 1 by the
     /// upsampler alone, over the exemplar's level 1 ([`ThinAtLevel1`]); None
@@ -796,8 +797,14 @@ impl OneVariant<'_> {
             (true, _) if a > 0 => log::info!("variant kept at attempt {a} (structure {:.3} at {res}^3)", rank.score),
             (true, _) => {}
             (false, true) => log::warn!(
-                "every attempt of {attempts} whole at {res}^3 was a near copy of the exemplar: the best kept (structure {:.3})",
-                rank.score
+                "every attempt of {attempts} whole at {res}^3 was a near copy of the exemplar: the best kept (structure {:.3}){}",
+                rank.score,
+                // Where the networks only copy, bends are what gives a new shape.
+                if opts.bend_voxels == 0.0 && could_bend(opts) {
+                    "; for a figure with nothing repeated in it (a statue, an animal), --set sample.bend_voxels=2 poses it anew"
+                } else {
+                    ""
+                }
             ),
             (false, false) => {
                 log::warn!("no attempt of {attempts} was whole at {res}^3: the best kept (structure {:.3})", rank.score)
