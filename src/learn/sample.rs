@@ -717,7 +717,6 @@ impl OneVariant<'_> {
         Ok(Start::Drawn(x, level))
     }
 
-
     /// The thin-part voxels of level-0 candidate `x` taken to level 1 by the
     /// upsampler alone, over the exemplar's level 1 ([`ThinAtLevel1`]); None
     /// where the exemplar has no thin parts to lose there.
@@ -780,12 +779,12 @@ impl OneVariant<'_> {
             let rank = if level.is_empty() {
                 AttemptRank { whole: false, new: false, score: 0.0 }
             } else {
+                let structure = Structure::of(level);
                 let s = match &bend {
-                    None => StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, &params),
-                    Some(b) => {
-                        let bent = b.bent(self.exemplar_levels, ex_level.index);
-                        StructureScores::against_bend(level, &Structure::of(level), (&bent, &Structure::of(&bent)), ex_level, ex_structure, &params)
-                    }
+                    None => StructureScores::new(level, &structure, ex_level, ex_structure, &params),
+                    // A bent pass's level is the exemplar's bent (and repaired):
+                    // its own pose.
+                    Some(_) => StructureScores::against_bend(level, &structure, (level, &structure), ex_level, ex_structure, &params),
                 };
                 log::debug!("attempt {a}{}: structure {:.3} {:?}", if bend.is_some() { " (bent)" } else { "" }, s.score, s.flags);
                 AttemptRank { whole: s.whole(), new: !s.flags.contains(&Flag::NearCopy), score: s.score }

@@ -301,9 +301,9 @@ pub fn sample_variants(
             // fit the bent surface where the unbent ones leave facets and
             // flakes (docs/results.md, "Bent starts").
             let bent_source: Option<Vec<Level>> = v.bend.map(|b| {
-                exemplar_levels
+                exemplar_levels[..=last]
                     .iter()
-                    .map(|l| if (coarse.index..=last).contains(&l.index) { b.bent(exemplar_levels, l.index) } else { l.clone() })
+                    .map(|l| if l.index >= coarse.index { b.bent(exemplar_levels, l.index) } else { l.clone() })
                     .collect()
             });
             let source = bent_source.as_deref().unwrap_or(exemplar_levels);
