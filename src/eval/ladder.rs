@@ -330,7 +330,7 @@ pub fn fallen_wall(levels: &[Level], degrees: f32) -> Vec<Level> {
     // Level k's voxel units -> normalised units.
     let vs = level.voxel_size() as f32;
     let centre = centroid * vs - Vec3::ONE;
-    let rel: Vec<Vec3> = act.iter().map(|&i| point_voxels(level, i) * vs - Vec3::ONE - centre).collect();
+    let rel: Vec<Vec3> = act.iter().map(|&i| level.point_voxels(i) * vs - Vec3::ONE - centre).collect();
     let range = |dir: Vec3| rel.iter().map(|p| p.dot(dir)).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)));
     let ((ground, top), (left, right)) = (range(up), range(across));
     let half_width = 0.25 * (right - left);
@@ -345,10 +345,10 @@ pub fn fallen_wall(levels: &[Level], degrees: f32) -> Vec<Level> {
         .map(|l| {
             let lv = l.voxel_size() as f32;
             let in_turn: Vec<bool> =
-                (0..l.len()).map(|i| l.mask[i] > 0.0 && in_section(point_voxels(l, i) * lv - Vec3::ONE - centre)).collect();
+                (0..l.len()).map(|i| l.mask[i] > 0.0 && in_section(l.point_voxels(i) * lv - Vec3::ONE - centre)).collect();
             let turned: Vec<usize> = (0..l.len()).filter(|&i| in_turn[i]).collect();
             let points: Vec<Vec3> =
-                turned.iter().map(|&i| (pivot + turn * (point_voxels(l, i) * lv - Vec3::ONE - pivot) + Vec3::ONE) / lv).collect();
+                turned.iter().map(|&i| (pivot + turn * (l.point_voxels(i) * lv - Vec3::ONE - pivot) + Vec3::ONE) / lv).collect();
             let normals: Vec<Vec3> = turned.iter().map(|&i| turn * l.normals[i]).collect();
             let colours: Vec<Vec3> = turned.iter().map(|&i| l.colours[i]).collect();
             let fallen = rebin(l, &points, &normals, &colours);
@@ -449,7 +449,7 @@ pub fn shrunken(level: &Level, finest: &Level, factor: f32) -> Level {
     // Normalised -> this level's voxel units: (p + 1) / vs.
     let c = (centroid.as_vec3() + Vec3::ONE) / vs;
     let act = active(level);
-    let points: Vec<Vec3> = act.iter().map(|&i| c + (point_voxels(level, i) - c) * factor).collect();
+    let points: Vec<Vec3> = act.iter().map(|&i| c + (level.point_voxels(i) - c) * factor).collect();
     let normals: Vec<Vec3> = act.iter().map(|&i| level.normals[i]).collect();
     let colours: Vec<Vec3> = act.iter().map(|&i| level.colours[i]).collect();
     rebin(level, &points, &normals, &colours)
@@ -457,12 +457,6 @@ pub fn shrunken(level: &Level, finest: &Level, factor: f32) -> Level {
 
 fn active(level: &Level) -> Vec<usize> {
     (0..level.len()).filter(|&i| level.mask[i] > 0.0).collect()
-}
-
-/// Surface point of voxel `i` in voxel units of its level (voxel `c` spans
-/// `[c, c+1)`).
-fn point_voxels(level: &Level, i: usize) -> Vec3 {
-    level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i]
 }
 
 /// Points (voxel units), normals and colours binned into the voxels that
@@ -526,7 +520,7 @@ pub fn smooth(level: &Level, iterations: usize) -> Level {
             v
         })
         .collect();
-    let mut points: Vec<Vec3> = act.iter().map(|&i| point_voxels(level, i)).collect();
+    let mut points: Vec<Vec3> = act.iter().map(|&i| level.point_voxels(i)).collect();
     let mut normals: Vec<Vec3> = act.iter().map(|&i| level.normals[i]).collect();
     for _ in 0..iterations {
         let next: Vec<(Vec3, Vec3)> = neighbours
@@ -599,7 +593,7 @@ pub fn blob(coarse: &Level, fine: &Level) -> Level {
                     let Some(&j) = index.get(b.as_ivec3() + o) else { continue };
                     let w = [0, 1, 2].iter().map(|&a| if o[a] == 1 { t[a] } else { 1.0 - t[a] }).product::<f32>();
                     let nj = coarse.normals[j].normalize_or_zero();
-                    d += w * nj.dot(x - point_voxels(coarse, j));
+                    d += w * nj.dot(x - coarse.point_voxels(j));
                     n += w * nj;
                     c += w * coarse.colours[j];
                     w_sum += w;

@@ -103,6 +103,11 @@ impl Level {
     pub fn voxel_centre(&self, c: IVec3) -> DVec3 {
         self.transform().centre_normalised(c)
     }
+    /// Surface point of voxel `i` in voxel units of this level (voxel `c`
+    /// spans `[c, c + 1)`).
+    pub fn point_voxels(&self, i: usize) -> Vec3 {
+        self.coords[i].as_vec3() + Vec3::splat(0.5) + self.offsets[i]
+    }
     /// Surface point of voxel `i` in normalised units.
     pub fn point_normalised(&self, i: usize) -> DVec3 {
         self.transform().point_normalised(self.coords[i], self.offsets[i])

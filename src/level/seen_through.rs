@@ -72,7 +72,7 @@ pub fn seen_through(level: &Level) -> Vec<f64> {
         return Vec::new();
     }
     let points: Vec<Vec3> =
-        active.iter().map(|&i| level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i]).collect();
+        active.iter().map(|&i| level.point_voxels(i)).collect();
     let normals: Vec<Vec3> = active.iter().map(|&i| level.normals[i].normalize_or_zero()).collect();
     let centre = points.iter().fold(Vec3::ZERO, |a, &p| a + p) / points.len() as f32;
     let reach = points.iter().map(|p| p.distance(centre)).fold(0.0, f32::max);

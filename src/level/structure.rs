@@ -136,7 +136,7 @@ pub fn thin_voxels(level: &Level, depth: f32) -> Vec<bool> {
             if n == Vec3::ZERO {
                 return false;
             }
-            let p = level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i];
+            let p = level.point_voxels(i);
             let mut d = 0.75f32;
             while d <= depth {
                 let q = (p - n * d).floor().as_ivec3();
@@ -339,7 +339,7 @@ const OPEN_SECTORS: usize = 3;
 /// neighbours on both faces (within the window, near the plane of either).
 pub fn free_boundary(level: &Level) -> Vec<bool> {
     let index: VoxelMap<usize> = (0..level.len()).filter(|&i| level.mask[i] > 0.0).map(|i| (level.coords[i], i)).collect();
-    let point = |i: usize| level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i];
+    let point = |i: usize| level.point_voxels(i);
     (0..level.len())
         .into_par_iter()
         .map(|i| {

@@ -66,7 +66,7 @@ impl Warp {
         let bumps = (0..WARP_BUMPS)
             .map(|_| {
                 let i = rng.below(level.len());
-                let centre = level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i];
+                let centre = level.point_voxels(i);
                 // A direction uniform on the sphere (z and azimuth uniform).
                 let z = 2.0 * rng.uniform() as f32 - 1.0;
                 let phi = std::f32::consts::TAU * rng.uniform() as f32;
@@ -92,7 +92,7 @@ impl Warp {
 
     /// The largest displacement of any of `level`'s surface points (voxels).
     pub fn largest_move(&self, level: &Level) -> f32 {
-        (0..level.len()).map(|i| self.displacement(surface_point(level, i)).length()).fold(0.0, f32::max)
+        (0..level.len()).map(|i| self.displacement(level.point_voxels(i)).length()).fold(0.0, f32::max)
     }
 
     fn weight(&self, p: Vec3, c: Vec3) -> f32 {
@@ -123,7 +123,7 @@ impl Warp {
         let mut splats: Vec<(IVec3, usize, Vec3, Vec3, f32, Vec3)> = (0..level.len())
             .into_par_iter()
             .flat_map_iter(|i| {
-                let s = surface_point(level, i);
+                let s = level.point_voxels(i);
                 let n = level.normals[i].normalize_or_zero();
                 let (t1, t2) = n.any_orthonormal_pair();
                 let colour = level.colours[i];
@@ -193,11 +193,6 @@ impl Bend {
     }
 }
 
-/// Surface point of voxel `i` in voxel units (the voxel spans [c, c + 1)).
-fn surface_point(level: &Level, i: usize) -> Vec3 {
-    level.coords[i].as_vec3() + Vec3::splat(0.5) + level.offsets[i]
-}
-
 /// The bounding box of `level`'s voxels, voxel units ((0, 0) when empty).
 fn bounds(level: &Level) -> (Vec3, Vec3) {
     if level.is_empty() {
@@ -232,7 +227,7 @@ mod tests {
         // Normals still point out of the ball.
         let centre = Vec3::splat(16.0);
         for i in 0..same.len() {
-            let p = same.coords[i].as_vec3() + Vec3::splat(0.5) + same.offsets[i];
+            let p = same.point_voxels(i);
             assert!(same.normals[i].dot(p - centre) > 0.0);
         }
     }
@@ -294,7 +289,7 @@ mod tests {
         // ball's centre for nearly all voxels.
         let centre = bent.coords.iter().map(|c| c.as_vec3()).sum::<Vec3>() / bent.len() as f32 + Vec3::splat(0.5);
         let outward = (0..bent.len())
-            .filter(|&i| bent.normals[i].dot(bent.coords[i].as_vec3() + Vec3::splat(0.5) + bent.offsets[i] - centre) > 0.0)
+            .filter(|&i| bent.normals[i].dot(bent.point_voxels(i) - centre) > 0.0)
             .count();
         assert!(outward as f64 > 0.95 * bent.len() as f64, "{outward} of {}", bent.len());
     }
