@@ -212,7 +212,40 @@ pub fn builtin_seeds(scratch: &Path) -> Vec<Seed> {
     )
     .expect("seed level writes");
     seeds.push(level_seed(std::fs::read(&level_path).expect("seed level reads back")));
+    seeds.push(bend_seed(&sphere, scratch));
     seeds
+}
+
+/// A bent variant's record (`bend.json`) beside an exemplar and a variant
+/// (the exemplar's own levels) for `eval`, which reads it and bends the
+/// exemplar again: the mutations hit the record only.
+pub fn bend_seed(sphere: &shapeshifter::io::mesh::Mesh, scratch: &Path) -> Seed {
+    let config = shapeshifter::config::Config::load(
+        "cpu",
+        &["encode.coarsest_resolution=16".into(), "encode.finest_resolution=64".into(), "encode.sampling_resolution=128".into()],
+    )
+    .expect("seed config");
+    let ex = scratch.join("bend_exemplar");
+    let exemplar = shapeshifter::io::exemplar::Exemplar::Mesh(sphere.clone());
+    shapeshifter::pipeline::encode_stage(&exemplar, "sphere", "0", &config, &ex).expect("seed exemplar encodes");
+    let mut files: Vec<(String, Vec<u8>)> = vec![(
+        format!("variant_000/{}", shapeshifter::level::warp::BEND_FILE),
+        serde_json::to_vec(&shapeshifter::level::warp::Bend { seed: 7, voxels: 2.0 }).expect("bend serialises"),
+    )];
+    for entry in std::fs::read_dir(&ex).expect("seed exemplar lists").flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let bytes = std::fs::read(entry.path()).expect("seed exemplar reads");
+        if name.starts_with("level_") && name.ends_with(".vdb") && !name.contains("points") {
+            files.push((format!("variant_000/{name}"), bytes.clone()));
+        }
+        files.push((format!("exemplar/{name}"), bytes));
+    }
+    Seed {
+        format: "bend.json".into(),
+        files,
+        mutable: vec![0],
+        commands: vec![args(&["eval", "{indir}/exemplar", "{indir}/variant_000", "-o", "{out}/eval.json"])],
+    }
 }
 
 /// The level-file commands: every reader path of a level file.
@@ -469,13 +502,19 @@ fn format_hash(s: &str) -> u64 {
 fn lay_out(seed: &Seed, dir: &Path, which: usize, bytes: &[u8]) {
     std::fs::create_dir_all(dir).expect("case folder");
     for (i, (name, content)) in seed.files.iter().enumerate() {
-        std::fs::write(dir.join(name), if i == which { bytes } else { content }).expect("case file");
+        let path = dir.join(name);
+        std::fs::create_dir_all(path.parent().expect("a file in the case folder")).expect("case subfolder");
+        std::fs::write(path, if i == which { bytes } else { content }).expect("case file");
     }
 }
 
-fn substitute(cmd: &[String], input: &Path, out: &Path) -> Vec<String> {
+/// `{in}` the main input file, `{indir}` the case's input folder, `{out}`
+/// the output folder.
+fn substitute(cmd: &[String], input: &Path, indir: &Path, out: &Path) -> Vec<String> {
     cmd.iter()
-        .map(|a| a.replace("{in}", &input.to_string_lossy()).replace("{out}", &out.to_string_lossy()))
+        .map(|a| {
+            a.replace("{indir}", &indir.to_string_lossy()).replace("{in}", &input.to_string_lossy()).replace("{out}", &out.to_string_lossy())
+        })
         .collect()
 }
 
@@ -489,7 +528,7 @@ fn baseline(c: &Campaign, seed: &Seed, work: &Path) -> Vec<u64> {
             let dir = work.join(format!("base_{}_{k}", format_hash(&seed.format)));
             lay_out(seed, &dir.join("in"), usize::MAX, &[]);
             std::fs::create_dir_all(dir.join("out")).expect("out folder");
-            let argv = substitute(cmd, &dir.join("in").join(seed.main_file()), &dir.join("out"));
+            let argv = substitute(cmd, &dir.join("in").join(seed.main_file()), &dir.join("in"), &dir.join("out"));
             let o = run_child(&c.bin, &argv, &dir.join("stderr"), c.limit);
             assert_eq!(o.code, Some(0), "intact {} input fails {argv:?}: {}", seed.format, o.stderr);
             std::fs::remove_dir_all(&dir).ok();
@@ -518,7 +557,7 @@ pub fn run_campaign(c: &Campaign, seeds: &[Seed], work: &Path) -> BTreeMap<Strin
                 lay_out(seed, &dir.join("in"), which, &bytes);
                 std::fs::create_dir_all(dir.join("out")).expect("out folder");
                 let input = dir.join("in").join(seed.main_file());
-                let argv = substitute(&seed.commands[k], &input, &dir.join("out"));
+                let argv = substitute(&seed.commands[k], &input, &dir.join("in"), &dir.join("out"));
                 let o = run_child(&c.bin, &argv, &dir.join("stderr"), c.limit);
                 let failed = o.code != Some(0);
                 let leftovers: Vec<String> = if failed {
