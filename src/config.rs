@@ -359,10 +359,33 @@ pub struct SampleConfig {
     /// the candidate least like the exemplar is kept. For a figure with
     /// nothing repeated in it (a bunny, a statue), whose level-0 network
     /// offers only the figure again or the figure with a part lost: a bent
-    /// exemplar is a new pose of the whole figure. Off in the profiles: a
-    /// bent wall is not a ruin's style. Not written when 0.
+    /// exemplar is a new pose of the whole figure. Not written when 0.
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub bend_voxels: f64,
+    /// Which exemplars `bend_voxels` bends: `figures` (the profiles'), only
+    /// an exemplar whose surface faces every way, with no flat faces and no
+    /// walls standing along an axis (`level::figure`: a bent wall leans and
+    /// a bent plate warps, neither a ruin's nor a part's style); `all`, any.
+    /// Not written when `figures`.
+    #[serde(default, skip_serializing_if = "BendExemplars::is_figures")]
+    pub bend_exemplars: BendExemplars,
+}
+
+/// Which exemplars sampling may bend (`sample.bend_exemplars`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BendExemplars {
+    /// Those [`crate::level::figure::FigureReading`] reads as figures.
+    #[default]
+    Figures,
+    /// Any exemplar.
+    All,
+}
+
+impl BendExemplars {
+    fn is_figures(&self) -> bool {
+        *self == BendExemplars::Figures
+    }
 }
 
 /// Which level-0 candidate a variant keeps (`sample.level0_pick`).
@@ -477,7 +500,7 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 11] = [
+        let defaults: [(&str, &str, toml::Value); 12] = [
             ("sample", "final_step", toml::Value::String("prediction".into())),
             ("sample", "level0_pick", toml::Value::String("first".into())),
             ("sample", "level0_sampler", toml::Value::String("same".into())),
@@ -488,6 +511,7 @@ impl Config {
             ("sample", "mend_sheets", toml::Value::Boolean(false)),
             ("sample", "remove_specks", toml::Value::Boolean(false)),
             ("sample", "bend_voxels", toml::Value::Float(0.0)),
+            ("sample", "bend_exemplars", toml::Value::String("figures".into())),
             ("train", "bf16", toml::Value::Boolean(false)),
         ];
         for (section, key, value) in defaults {

@@ -3,7 +3,7 @@ use std::sync::atomic::AtomicBool;
 
 use glam::{DVec3, IVec3};
 use tch::{Device, Kind, Tensor};
-use shapeshifter::config::Config;
+use shapeshifter::config::{BendExemplars, Config};
 use shapeshifter::level::Level;
 use shapeshifter::learn::nn::{new_diffusion, new_upsampler};
 use shapeshifter::learn::sample::{level0_box, load_models, SampleOptions};
@@ -56,6 +56,9 @@ fn tiny(over: &[&str]) -> Config {
         "sample.attempts=2",
         // f32: these tests compare runs bit for bit (bf16 has its own test)
         "train.bf16=false",
+        // The sphere is a figure: these tests follow the networks' passes
+        // (bends have their own test).
+        "sample.bend_voxels=0",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -401,6 +404,18 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     let off = SampleOptions { bend_voxels: 0.0, ..opts.clone() };
     let plain = shapeshifter::learn::sample::sample(&models, &levels, &off, None).unwrap();
     assert!(plain.iter().all(|v| v.bend.is_none()), "bent without bend_voxels");
+
+    // Bends for figures only (the profiles'): the sphere is one, a block with
+    // flat faces and upright walls is not, and is never bent; `all` bends it.
+    let small = shapeshifter::encode::EncodeOptions { sampling_resolution: 64, coarsest_resolution: 8, finest_resolution: 32, ..Default::default() };
+    let block = shapeshifter::testing::shapes::axis_box(glam::Vec3::new(-0.6, -0.9, -0.5), glam::Vec3::new(0.6, 0.9, 0.5));
+    let block = shapeshifter::encode::encode(&block, &small).unwrap().0;
+    assert_eq!(opts.bend_exemplars, BendExemplars::Figures);
+    let figures_only = shapeshifter::learn::sample::sample(&models, &block, &opts, None).unwrap();
+    assert!(figures_only.iter().all(|v| v.bend.is_none()), "a block bent as a figure");
+    let all = SampleOptions { bend_exemplars: BendExemplars::All, ..opts.clone() };
+    let any = shapeshifter::learn::sample::sample(&models, &block, &all, None).unwrap();
+    assert!(any.iter().all(|v| v.bend.is_some()), "bend_exemplars = all did not bend the block");
 
     // Networks finer than the structure level (64^3), several attempts: the
     // kept bent pass stays bent past the level the attempts stop at.

@@ -53,7 +53,7 @@ use std::sync::Arc;
 use glam::IVec3;
 use tch::{Device, Kind, Tensor};
 
-use crate::config::Config;
+use crate::config::{BendExemplars, Config};
 use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Schedule, TRAINING_PARAMETERISATION};
 use crate::level::structure::{thin_count, Flag, Structure, StructureParams, StructureScores};
 use crate::error::{Error, Result};
@@ -63,6 +63,7 @@ use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
+use crate::level::figure::{FigureReading, MAX_UPRIGHT_SHARE, MIN_NORMAL_SPREAD};
 use crate::level::warp::Bend;
 use crate::util::seed::{derive_seed, Stream};
 
@@ -207,6 +208,10 @@ pub struct SampleOptions {
     /// before it existed still match.
     #[serde(skip_serializing_if = "is_zero")]
     pub bend_voxels: f64,
+    /// Which exemplars are bent (`sample.bend_exemplars`). Not written when
+    /// `figures`, the default.
+    #[serde(default, skip_serializing_if = "is_figures")]
+    pub bend_exemplars: BendExemplars,
 }
 
 impl SampleOptions {
@@ -232,6 +237,7 @@ impl SampleOptions {
             mend_sheets: config.sample.mend_sheets,
             remove_specks: config.sample.remove_specks,
             bend_voxels: config.sample.bend_voxels,
+            bend_exemplars: config.sample.bend_exemplars,
         }
     }
 }
@@ -276,6 +282,10 @@ pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
+}
+
+fn is_figures(v: &BendExemplars) -> bool {
+    *v == BendExemplars::Figures
 }
 
 /// One sampled variant: the pruned level of each stage produced, coarsest
@@ -332,6 +342,7 @@ pub fn sample(
     // Also when sampling stops at level 0 (see `Models::upsamplers`).
     let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
+    let bending = Bending::of(opts, exemplar_levels, from.is_some());
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
@@ -348,6 +359,7 @@ pub fn sample(
                     structure_reference: reference.as_ref().map(|(l, s)| (*l, s)),
                     exemplar1,
                     repairs: &repairs,
+                    bending,
                 };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
@@ -391,6 +403,52 @@ struct OneVariant<'a> {
     /// Per level, what it gets once made ([`crate::level::repair::repairs`];
     /// empty: nothing).
     repairs: &'a [LevelRepair],
+    /// Whether a pass with nothing new at level 0 is the exemplar bent.
+    bending: Bending,
+}
+
+/// Whether sampling bends a pass whose level-0 candidates are none new
+/// enough (`sample.bend_voxels`, `sample.bend_exemplars`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Bending {
+    /// No bends asked for, or none possible (not the novel pick of several
+    /// candidates over the exemplar's box, or continuing from a level).
+    Never,
+    /// Bends asked for `figures`, and the exemplar is none.
+    NotAFigure,
+    /// The exemplar bent by up to this many level-0 voxels.
+    Bends(f64),
+}
+
+impl Bending {
+    fn of(opts: &SampleOptions, exemplar_levels: &[Level], continuing: bool) -> Bending {
+        if opts.bend_voxels == 0.0 || !could_bend(opts) || continuing {
+            return Bending::Never;
+        }
+        if opts.bend_exemplars == BendExemplars::All {
+            return Bending::Bends(opts.bend_voxels);
+        }
+        let reading = crate::level::structure::structure_level(exemplar_levels).and_then(FigureReading::of);
+        let Some(r) = reading else { return Bending::NotAFigure };
+        let figures = format!(
+            "(a figure: at least {MIN_NORMAL_SPREAD}, at most {MAX_UPRIGHT_SHARE})"
+        );
+        if r.is_figure() {
+            log::info!(
+                "the exemplar is a figure (normal spread {:.2}, upright share {:.2} {figures}): a pass with nothing new at level 0 is the exemplar bent",
+                r.normal_spread,
+                r.upright_share
+            );
+            Bending::Bends(opts.bend_voxels)
+        } else {
+            log::info!(
+                "the exemplar has flat faces or upright walls (normal spread {:.2}, upright share {:.2} {figures}): it is not bent",
+                r.normal_spread,
+                r.upright_share
+            );
+            Bending::NotAFigure
+        }
+    }
 }
 
 /// The thin-part check of a level-0 candidate one level finer. At 16^3 a
@@ -695,8 +753,8 @@ impl OneVariant<'_> {
             }
         }
         let (k, why) = pick.kept().expect("at least one candidate");
-        if !matches!(why, Kept::First | Kept::NewEnough { .. }) && opts.bend_voxels > 0.0 && could_bend(opts) {
-            let bend = Bend { seed: derive_seed(seed, 0, Stream::Bend, 0), voxels: opts.bend_voxels as f32 };
+        if let (false, Bending::Bends(voxels)) = (matches!(why, Kept::First | Kept::NewEnough { .. }), self.bending) {
+            let bend = Bend { seed: derive_seed(seed, 0, Stream::Bend, 0), voxels: voxels as f32 };
             log::info!("level 0: none of {candidates} candidates new enough: the exemplar bent instead (seed {})", bend.seed);
             return Ok(Start::Bent(bend));
         }
@@ -799,10 +857,12 @@ impl OneVariant<'_> {
                 "every attempt of {attempts} whole at {res}^3 was a near copy of the exemplar: the best kept (structure {:.3}){}",
                 rank.score,
                 // Where the networks only copy, bends are what gives a new shape.
-                if opts.bend_voxels == 0.0 && could_bend(opts) {
-                    "; for a figure with nothing repeated in it (a statue, an animal), --set sample.bend_voxels=2 poses it anew"
-                } else {
-                    ""
+                match self.bending {
+                    Bending::Never if opts.bend_voxels == 0.0 && could_bend(opts) => {
+                        "; for a figure with nothing repeated in it (a statue, an animal), --set sample.bend_voxels=2 poses it anew"
+                    }
+                    Bending::NotAFigure => "; the exemplar has flat faces or upright walls, so it is not bent (--set sample.bend_exemplars=all bends it)",
+                    _ => "",
                 }
             ),
             (false, false) => {
