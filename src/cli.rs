@@ -855,6 +855,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     }
     // No progress bars with --quiet, or with ALF lines (or none) instead.
     let no_bars = cli.quiet || cli.progress != ProgressMode::Bars;
+    shapeshifter::learn::reproducible_kernels();
     if cli.threads > 0 {
         tch::set_num_threads(cli.threads);
     }

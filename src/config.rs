@@ -836,6 +836,7 @@ mod tests {
             "sample.reject_copies=false",
             "sample.mend_sheets=false",
             "sample.remove_specks=false",
+            "sample.bend_voxels=0",
             "sample.level0_pick=first",
             "sample.level0_sampler=same",
             "sample.level0_steps=50",

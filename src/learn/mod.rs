@@ -12,3 +12,21 @@ pub mod schedule;
 pub mod noise;
 pub mod sparse;
 pub mod train;
+
+/// Asks MKL, libtorch's CPU matrix library, for its strict reproducible mode
+/// (`MKL_CBWR=AUTO,STRICT`) unless the environment names a mode: the same
+/// bits whatever the thread count. Without it, on an AVX-512 machine (a Xeon
+/// with AVX512-BF16/FP16, 2026-12-05) a level's weights after the same steps
+/// differed between 1 and 2 libtorch threads, and so between a run and its
+/// resumed or sharded twin; on the AVX2 machines before they did not. MKL
+/// reads the setting once, at its first call, so this runs before any
+/// network is built (and at the start of every process, `main`); child
+/// processes inherit it.
+pub fn reproducible_kernels() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if std::env::var_os("MKL_CBWR").is_none() {
+            std::env::set_var("MKL_CBWR", "AUTO,STRICT");
+        }
+    });
+}

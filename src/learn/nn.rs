@@ -192,6 +192,7 @@ impl<N> LevelNet<N> {
 /// A freshly initialised diffusion model for `level` (initialisation draws from
 /// libtorch's global generator: seed it first for reproducible weights).
 pub fn new_diffusion(config: &ModelConfig, level: usize, device: Device) -> Result<LevelNet<DiffusionNet>> {
+    super::reproducible_kernels();
     let vs = nn::VarStore::new(device);
     let net = DiffusionNet::new(&vs.root(), DiffusionShape::for_level(config, level), config.dropout)?;
     Ok(LevelNet { vs, net })
@@ -199,6 +200,7 @@ pub fn new_diffusion(config: &ModelConfig, level: usize, device: Device) -> Resu
 
 /// A freshly initialised upsampler (levels >= 1).
 pub fn new_upsampler(config: &ModelConfig, device: Device) -> Result<LevelNet<Upsampler>> {
+    super::reproducible_kernels();
     let vs = nn::VarStore::new(device);
     let net = Upsampler::new(&vs.root(), config.upsampler_channels, config.upsampler_dropout)?;
     Ok(LevelNet { vs, net })
