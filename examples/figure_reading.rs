@@ -1,6 +1,6 @@
 //! Whether encoded exemplars are figures, the reading that decides whether
 //! sampling may bend them (`sample.bend_exemplars = "figures"`): the normal
-//! spread and the upright share of each one's structure level (64^3), see
+//! spread and the upright share of each one's structure level (48^3 to 64^3), see
 //! `shapeshifter::level::figure`.
 //!
 //! `cargo run --release --example figure_reading -- ENCODED_DIR...` (folders
@@ -8,7 +8,6 @@
 //! and then `DIR/*`)
 
 use shapeshifter::level::figure::FigureReading;
-use shapeshifter::level::structure::structure_level;
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {
@@ -21,8 +20,8 @@ fn main() -> anyhow::Result<()> {
             .take_while(|p| p.exists())
             .map(|p| shapeshifter::io::vdb::read_level(&p).map(|x| x.0))
             .collect::<Result<_, _>>()?;
-        let Some(r) = structure_level(&levels).and_then(FigureReading::of) else {
-            println!("{d:<40} no surface voxels");
+        let Some(r) = FigureReading::of_exemplar(&levels) else {
+            println!("{d:<40} no level of 48^3 to 64^3 with surface voxels");
             continue;
         };
         let name = Path::new(d).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| d.clone());

@@ -385,7 +385,9 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     use std::collections::HashSet;
     let _guard = serial();
     let levels = sphere_levels(&[8, 16, 32], DVec3::new(0.05, -0.1, 0.0), 0.55);
-    let config = tiny(&["sample.bend_voxels=1.5", "sample.remove_specks=false", "sample.mend_sheets=false"]);
+    // `all`: the sphere's levels stop at 32^3, too coarse to be read as a
+    // figure (the reading's own wiring is checked below).
+    let config = tiny(&["sample.bend_voxels=1.5", "sample.bend_exemplars=all", "sample.remove_specks=false", "sample.mend_sheets=false"]);
     let models = shapeshifter::learn::sample::untrained_models(&config, 3, Device::Cpu, 3).unwrap();
     let opts = SampleOptions { stop_level: Some(2), ..SampleOptions::from_config(&config, 2, 5) };
     let bent = shapeshifter::learn::sample::sample(&models, &levels, &opts, None).unwrap();
@@ -405,17 +407,25 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     let plain = shapeshifter::learn::sample::sample(&models, &levels, &off, None).unwrap();
     assert!(plain.iter().all(|v| v.bend.is_none()), "bent without bend_voxels");
 
-    // Bends for figures only (the profiles'): the sphere is one, a block with
-    // flat faces and upright walls is not, and is never bent; `all` bends it.
-    let small = shapeshifter::encode::EncodeOptions { sampling_resolution: 64, coarsest_resolution: 8, finest_resolution: 32, ..Default::default() };
+    // Bends for figures only (the profiles'), read at 64^3 (the exemplars'
+    // fourth level here, sampling stops at the third): the sphere is one and
+    // is bent; a block with flat faces and upright walls is not, and is never
+    // bent; `all` bends it.
+    let figures = SampleOptions { bend_exemplars: BendExemplars::Figures, ..opts.clone() };
+    let sphere4 = sphere_levels(&[8, 16, 32, 64], DVec3::new(0.05, -0.1, 0.0), 0.55);
+    let posed = shapeshifter::learn::sample::sample(&models, &sphere4, &figures, None).unwrap();
+    assert!(posed.iter().all(|v| v.bend.is_some()), "the sphere, a figure, not bent");
+    let to64 = shapeshifter::encode::EncodeOptions { sampling_resolution: 128, coarsest_resolution: 8, finest_resolution: 64, ..Default::default() };
     let block = shapeshifter::testing::shapes::axis_box(glam::Vec3::new(-0.6, -0.9, -0.5), glam::Vec3::new(0.6, 0.9, 0.5));
-    let block = shapeshifter::encode::encode(&block, &small).unwrap().0;
-    assert_eq!(opts.bend_exemplars, BendExemplars::Figures);
-    let figures_only = shapeshifter::learn::sample::sample(&models, &block, &opts, None).unwrap();
+    let block = shapeshifter::encode::encode(&block, &to64).unwrap().0;
+    let figures_only = shapeshifter::learn::sample::sample(&models, &block, &figures, None).unwrap();
     assert!(figures_only.iter().all(|v| v.bend.is_none()), "a block bent as a figure");
-    let all = SampleOptions { bend_exemplars: BendExemplars::All, ..opts.clone() };
+    let all = SampleOptions { bend_exemplars: BendExemplars::All, ..figures.clone() };
     let any = shapeshifter::learn::sample::sample(&models, &block, &all, None).unwrap();
     assert!(any.iter().all(|v| v.bend.is_some()), "bend_exemplars = all did not bend the block");
+    // Levels that stop below 48^3 are not read: not bent as a figure.
+    let coarse = shapeshifter::learn::sample::sample(&models, &levels, &figures, None).unwrap();
+    assert!(coarse.iter().all(|v| v.bend.is_none()), "bent on a reading at 32^3");
 
     // Networks finer than the structure level (64^3), several attempts: the
     // kept bent pass stays bent past the level the attempts stop at.
@@ -431,6 +441,7 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     // and further from the exemplar itself.
     let transfer = tiny(&[
         "sample.bend_voxels=1.5",
+        "sample.bend_exemplars=all",
         "sample.remove_specks=false",
         "sample.mend_sheets=false",
         "encode.sampling_resolution=64",

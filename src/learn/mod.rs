@@ -30,3 +30,28 @@ pub fn reproducible_kernels() {
         }
     });
 }
+
+/// libtorch's CPU thread count set to 1 until dropped, then restored: around
+/// the operations whose result depends on the thread count, so weights do
+/// not. A dense convolution (the training target's blur) and a reduction of
+/// a whole tensor to one number (the gradients' norm) split their sums by
+/// thread and add the parts in another order; on an AVX-512 machine
+/// elementwise sin, cos and exp gave other bits at a thread's split too, so
+/// a training step's forward and backward run on one thread on the CPU
+/// (matrix products alone are the same bits on any count, with
+/// [`reproducible_kernels`]).
+pub(crate) struct OneThread(i32);
+
+impl OneThread {
+    pub(crate) fn new() -> Self {
+        let before = tch::get_num_threads();
+        tch::set_num_threads(1);
+        OneThread(before)
+    }
+}
+
+impl Drop for OneThread {
+    fn drop(&mut self) {
+        tch::set_num_threads(self.0);
+    }
+}

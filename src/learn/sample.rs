@@ -63,7 +63,7 @@ use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
-use crate::level::figure::{FigureReading, MAX_UPRIGHT_SHARE, MIN_NORMAL_SPREAD};
+use crate::level::figure::{FigureReading, MAX_UPRIGHT_SHARE, MIN_NORMAL_SPREAD, MIN_READING_RESOLUTION};
 use crate::level::warp::Bend;
 use crate::util::seed::{derive_seed, Stream};
 
@@ -428,24 +428,19 @@ impl Bending {
         if opts.bend_exemplars == BendExemplars::All {
             return Bending::Bends(opts.bend_voxels);
         }
-        let reading = crate::level::structure::structure_level(exemplar_levels).and_then(FigureReading::of);
-        let Some(r) = reading else { return Bending::NotAFigure };
-        let figures = format!(
-            "(a figure: at least {MIN_NORMAL_SPREAD}, at most {MAX_UPRIGHT_SHARE})"
+        let Some(r) = FigureReading::of_exemplar(exemplar_levels) else {
+            log::info!("the exemplar has no level of {MIN_READING_RESOLUTION}^3 to 64^3 to read whether it is a figure: it is not bent");
+            return Bending::NotAFigure;
+        };
+        let reading = format!(
+            "normal spread {:.2}, a figure's at least {MIN_NORMAL_SPREAD}; upright share {:.2}, a figure's at most {MAX_UPRIGHT_SHARE}",
+            r.normal_spread, r.upright_share
         );
         if r.is_figure() {
-            log::info!(
-                "the exemplar is a figure (normal spread {:.2}, upright share {:.2} {figures}): a pass with nothing new at level 0 is the exemplar bent",
-                r.normal_spread,
-                r.upright_share
-            );
+            log::info!("the exemplar is a figure ({reading}): a pass with nothing new at level 0 is the exemplar bent");
             Bending::Bends(opts.bend_voxels)
         } else {
-            log::info!(
-                "the exemplar has flat faces or upright walls (normal spread {:.2}, upright share {:.2} {figures}): it is not bent",
-                r.normal_spread,
-                r.upright_share
-            );
+            log::info!("the exemplar has flat faces or upright walls ({reading}): it is not bent");
             Bending::NotAFigure
         }
     }

@@ -79,7 +79,7 @@ pub fn upsample_trilinear(coarse: &SparseTensor) -> Result<SparseTensor> {
 /// trained on this target must not depend on how many threads a process has
 /// (or is granted while it trains). The box is at most a few thousand voxels.
 pub fn flood_blur(gt: &SparseTensor) -> Result<SparseTensor> {
-    let _one_thread = (gt.device() == Device::Cpu).then(OneThread::new);
+    let _one_thread = (gt.device() == Device::Cpu).then(crate::learn::OneThread::new);
     tch::no_grad(|| {
         let (bx, index) = gt.grid.dense_box()?;
         let (dev, kind) = (gt.device(), gt.feats.kind());
@@ -110,21 +110,4 @@ pub fn flood_blur(gt: &SparseTensor) -> Result<SparseTensor> {
         let _ = feats.index_copy_(0, &index, &gt.feats.detach());
         SparseTensor::new(Arc::new(bx), feats)
     })
-}
-
-/// libtorch's CPU thread count set to 1 until dropped, then restored.
-struct OneThread(i32);
-
-impl OneThread {
-    fn new() -> Self {
-        let before = tch::get_num_threads();
-        tch::set_num_threads(1);
-        OneThread(before)
-    }
-}
-
-impl Drop for OneThread {
-    fn drop(&mut self) {
-        tch::set_num_threads(self.0);
-    }
 }

@@ -309,6 +309,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
             let base = state.clone();
             let r = phase.run(&mut state.upsampler_steps, &mut state.upsampler_loss, &stop, |step| {
                 tch::manual_seed(derive_seed(tc.seed, level as u64, Stream::UpsamplerStep, step as u64) as i64);
+                let _one = (coarse.device() == Device::Cpu).then(crate::learn::OneThread::new);
                 let pred = net.forward_t(coarse, true)?;
                 let loss = mse(&pred.feats, &target_f);
                 let mut opt = opt.borrow_mut();
@@ -495,6 +496,13 @@ pub fn diffusion_step(
     let eps = crate::learn::noise::standard_normal(size[0] as usize, size[1] as usize, noise_seed, x0.feats.device())
         .to_kind(x0.feats.kind());
     let x_t = x0.with_feats(Schedule::default().add_noise_rows(&x0.feats, t_rows, &eps))?;
+    // On the CPU the step runs on one thread, whatever the process has:
+    // elementwise sin, cos and exp (the time embedding, SiLU) and their
+    // gradients split their rows by thread, and on an AVX-512 machine the
+    // rows at a split's ragged end came out in other bits, so weights
+    // depended on the thread count (and a run on its granted cores,
+    // `thread_grant_path`, differed from its resumed or staged twin).
+    let _one = (x0.feats.device() == Device::Cpu).then(crate::learn::OneThread::new);
     let pred = net.forward_t(&x_t, t_rows, true)?;
     let loss = mse(&pred.feats, &x0.feats);
     opt.zero_grad();
