@@ -210,7 +210,7 @@ pub struct SampleOptions {
     pub bend_voxels: f64,
     /// Which exemplars are bent (`sample.bend_exemplars`). Not written when
     /// `figures`, the default.
-    #[serde(default, skip_serializing_if = "is_figures")]
+    #[serde(default, skip_serializing_if = "BendExemplars::is_figures")]
     pub bend_exemplars: BendExemplars,
 }
 
@@ -282,10 +282,6 @@ pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
-}
-
-fn is_figures(v: &BendExemplars) -> bool {
-    *v == BendExemplars::Figures
 }
 
 /// One sampled variant: the pruned level of each stage produced, coarsest
