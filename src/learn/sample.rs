@@ -432,11 +432,13 @@ impl Bending {
             "normal spread {:.2}, a figure's at least {MIN_NORMAL_SPREAD}; upright share {:.2}, a figure's at most {MAX_UPRIGHT_SHARE}",
             r.normal_spread, r.upright_share
         );
+        // Said once per process: the pipeline samples one variant per call.
+        static SAID: std::sync::Once = std::sync::Once::new();
         if r.is_figure() {
-            log::info!("the exemplar is a figure ({reading}): a pass with nothing new at level 0 is the exemplar bent");
+            SAID.call_once(|| log::info!("the exemplar is a figure ({reading}): a pass with nothing new at level 0 is the exemplar bent"));
             Bending::Bends(opts.bend_voxels)
         } else {
-            log::info!("the exemplar has flat faces or upright walls ({reading}): it is not bent");
+            SAID.call_once(|| log::info!("the exemplar has flat faces or upright walls ({reading}): it is not bent"));
             Bending::NotAFigure
         }
     }
