@@ -37,8 +37,8 @@ pub fn reproducible_kernels() {
 /// a whole tensor to one number (the gradients' norm) split their sums by
 /// thread and add the parts in another order; on an AVX-512 machine
 /// elementwise sin, cos and exp gave other bits at a thread's split too, so
-/// a training step's forward and backward run on one thread on the CPU
-/// (matrix products alone are the same bits on any count, with
+/// a training step (forward, backward, clipping, update) runs on one thread
+/// on the CPU (matrix products alone are the same bits on any count, with
 /// [`reproducible_kernels`]).
 pub(crate) struct OneThread(i32);
 

@@ -424,23 +424,25 @@ impl Bending {
         if opts.bend_exemplars == BendExemplars::All {
             return Bending::Bends(opts.bend_voxels);
         }
-        let Some(r) = FigureReading::of_exemplar(exemplar_levels) else {
-            log::info!("the exemplar has no level of {MIN_READING_RESOLUTION}^3 to 64^3 to read whether it is a figure: it is not bent");
-            return Bending::NotAFigure;
+        let reading = FigureReading::of_exemplar(exemplar_levels);
+        let (bending, why) = match reading {
+            None => (Bending::NotAFigure, format!("the exemplar has no level of {MIN_READING_RESOLUTION}^3 to 64^3 to read whether it is a figure: it is not bent")),
+            Some(r) => {
+                let figures = format!(
+                    "normal spread {:.2}, a figure's at least {MIN_NORMAL_SPREAD}; upright share {:.2}, a figure's at most {MAX_UPRIGHT_SHARE}",
+                    r.normal_spread, r.upright_share
+                );
+                if r.is_figure() {
+                    (Bending::Bends(opts.bend_voxels), format!("the exemplar is a figure ({figures}): a pass with nothing new at level 0 is the exemplar bent"))
+                } else {
+                    (Bending::NotAFigure, format!("the exemplar has flat faces or upright walls ({figures}): it is not bent"))
+                }
+            }
         };
-        let reading = format!(
-            "normal spread {:.2}, a figure's at least {MIN_NORMAL_SPREAD}; upright share {:.2}, a figure's at most {MAX_UPRIGHT_SHARE}",
-            r.normal_spread, r.upright_share
-        );
         // Said once per process: the pipeline samples one variant per call.
         static SAID: std::sync::Once = std::sync::Once::new();
-        if r.is_figure() {
-            SAID.call_once(|| log::info!("the exemplar is a figure ({reading}): a pass with nothing new at level 0 is the exemplar bent"));
-            Bending::Bends(opts.bend_voxels)
-        } else {
-            SAID.call_once(|| log::info!("the exemplar has flat faces or upright walls ({reading}): it is not bent"));
-            Bending::NotAFigure
-        }
+        SAID.call_once(|| log::info!("{why}"));
+        bending
     }
 }
 

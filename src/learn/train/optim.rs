@@ -71,13 +71,10 @@ impl Adam {
             if grads.is_empty() {
                 return;
             }
-            // One thread: a whole-tensor norm's parts are added in an order
-            // that depends on the thread count, and the scale it sets would.
-            let total = {
-                let _one = crate::learn::OneThread::new();
-                let norms: Vec<Tensor> = grads.iter().map(|g| g.norm()).collect();
-                Tensor::stack(&norms, 0).norm().double_value(&[])
-            };
+            // (Training calls this inside its step's one-thread guard: a
+            // whole-tensor norm's parts are added in a thread-count order.)
+            let norms: Vec<Tensor> = grads.iter().map(|g| g.norm()).collect();
+            let total = Tensor::stack(&norms, 0).norm().double_value(&[]);
             let coef = max / (total + 1e-6);
             if coef < 1.0 {
                 for mut g in grads {
