@@ -35,6 +35,10 @@ pub struct VariantFiles {
     pub coarsest: Level,
     /// The finest level of at most [`STRUCTURE_RESOLUTION`]^3.
     pub structure: Option<Level>,
+    /// The level after the structure level (128^3), if the variant has one
+    /// below its finest ([`crate::level::structure::fine_level`]); the
+    /// finest itself where that is the one.
+    pub fine: Option<Level>,
     pub mesh: Option<Mesh>,
     /// The bend of its start, where it started from the exemplar bent
     /// ([`crate::level::warp::BEND_FILE`]).
@@ -63,8 +67,9 @@ pub fn level_files(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
 }
 
 /// Reads a variant folder: the highest and lowest `level_K.vdb` present, the
-/// structure level (read upwards from the coarsest until
-/// [`STRUCTURE_RESOLUTION`] is reached: small files) and `mesh.ply` if there.
+/// structure level and the level after it (read upwards from the coarsest
+/// until a level finer than [`STRUCTURE_RESOLUTION`] is reached: small files)
+/// and `mesh.ply` if there.
 pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let levels = level_files(dir)?;
     let hi = &levels[levels.len() - 1];
@@ -72,20 +77,23 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let mut coarse_levels: Vec<Level> = Vec::new();
     for (_, path) in &levels[..levels.len() - 1] {
         let (level, _) = vdb::read_level(path)?;
-        // Resolutions double per level: the next one is finer than needed.
-        let reached = level.resolution >= STRUCTURE_RESOLUTION;
+        // Resolutions double per level: the one after the structure level
+        // (the fine level) is the last one needed.
+        let reached = level.resolution > STRUCTURE_RESOLUTION;
         coarse_levels.push(level);
         if reached {
             break;
         }
     }
     let coarsest = coarse_levels.first().cloned().unwrap_or_else(|| finest.clone());
-    let structure = coarse_levels.into_iter().chain(std::iter::once(finest.clone())).filter(|l| l.resolution <= STRUCTURE_RESOLUTION).last();
+    let read: Vec<Level> = coarse_levels.into_iter().chain(std::iter::once(finest.clone())).collect();
+    let structure = crate::level::structure::structure_level(&read).cloned();
+    let fine = crate::level::structure::fine_level(&read).cloned();
     let mesh_path = dir.join("mesh.ply");
     let mesh = if mesh_path.is_file() { Some(mesh::load(&mesh_path)?) } else { None };
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let bend = read_bend(dir)?;
-    Ok(VariantFiles { name, finest, coarsest, structure, mesh, bend })
+    Ok(VariantFiles { name, finest, coarsest, structure, fine, mesh, bend })
 }
 
 /// A variant folder's bend record ([`crate::level::warp::BEND_FILE`]), if
@@ -269,6 +277,18 @@ pub fn evaluate(
     // The exemplar's structure level bent as each bent variant's start was.
     let bent: Vec<Option<Level>> =
         variants.iter().map(|v| v.bend.zip(ex_structure).map(|(b, l)| b.bent(&levels, l.index))).collect();
+    // And its fine level, to compare each variant's with (bent likewise).
+    let ex_fine_level = crate::level::structure::fine_level(&levels);
+    let fine_references: Vec<Option<std::borrow::Cow<Level>>> = variants
+        .iter()
+        .map(|v| {
+            let ex = ex_fine_level?;
+            Some(match v.bend {
+                Some(b) => std::borrow::Cow::Owned(b.bent(&levels, ex.index)),
+                None => std::borrow::Cow::Borrowed(ex),
+            })
+        })
+        .collect();
     let exemplar = ShapeInput {
         name: "exemplar".into(),
         occupancy: &ex_occ[0],
@@ -277,13 +297,15 @@ pub fn evaluate(
         coarse_points: Some(&ex_coarse_pts),
         structure_level: ex_structure,
         bent_reference: None,
+        fine_level: None,
     };
     let inputs: Vec<ShapeInput> = variants
         .iter()
         .zip(&occs)
         .zip(&coarse)
         .zip(&bent)
-        .map(|(((v, occ), c), b)| ShapeInput {
+        .zip(&fine_references)
+        .map(|((((v, occ), c), b), fr)| ShapeInput {
             name: v.name.clone(),
             occupancy: &occ[0],
             occupancy_22: &occ[1],
@@ -291,6 +313,7 @@ pub fn evaluate(
             coarse_points: Some(c),
             structure_level: v.structure.as_ref(),
             bent_reference: b.as_ref(),
+            fine_level: v.fine.as_ref().zip(fr.as_deref()),
         })
         .collect();
     metrics::check_shape(&exemplar)

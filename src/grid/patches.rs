@@ -452,6 +452,58 @@ pub fn best_iou_at_every_surface_voxel(shape: &Occupancy, dict: &ExemplarPatches
     centres.into_iter().zip(best).map(|(c, b)| (c, b.iou())).collect()
 }
 
+/// The surface voxels of `shape` whose patch overlaps no patch of `dict` with
+/// an IoU of `threshold` or more, in storage order: exactly the voxels whose
+/// [`best_iou_at_every_surface_voxel`] is below `threshold` (every voxel when
+/// the dictionary is empty), found faster. A patch stops at its first match of
+/// `threshold` (an identical patch, one of 512 evenly spaced seeds, or the
+/// first dictionary patch the slab bound lets through that reaches it), so
+/// only the patches like nothing in the dictionary are compared with all of
+/// it; the IoU bound is the one of [`match_patches`].
+pub fn surface_voxels_below_iou(shape: &Occupancy, dict: &ExemplarPatches, threshold: f64) -> Vec<[u32; 3]> {
+    let layers = PatchLayers::new(shape);
+    let centres = layers.centres(1);
+    if dict.is_empty() {
+        return centres;
+    }
+    // The IoU as [`Best::iou`] has it, so a patch exactly at the threshold
+    // is decided as there.
+    let reaches = |inter: u32, union: u32| union > 0 && inter as f64 / union as f64 >= threshold;
+    let below: Vec<bool> = centres
+        .par_iter()
+        .map(|&c| {
+            let pa = layers.patch(c);
+            if dict.patches.binary_search(&pa).is_ok() {
+                return false;
+            }
+            let inter = |pb: &Patch| (0..PATCH_WORDS).map(|i| (pa.occ[i] & pb.occ[i]).count_ones()).sum::<u32>();
+            let step = dict.patches.len().div_ceil(512).max(1);
+            if dict.patches.iter().step_by(step).any(|pb| {
+                let n = inter(pb);
+                reaches(n, pa.occ_n + pb.occ_n - n)
+            }) {
+                return false;
+            }
+            let sig = Sig::of(&pa);
+            for (block, tile) in dict.patches.chunks(LANES).zip(&dict.tiles) {
+                let u = tile.overlap_bound(&sig.occ, 0);
+                for (l, pb) in block.iter().enumerate() {
+                    // The bound on the IoU, u / (|A| + |B| - u), first.
+                    let ub = u[l] as u32;
+                    if reaches(ub, pa.occ_n + pb.occ_n - ub) {
+                        let n = inter(pb);
+                        if reaches(n, pa.occ_n + pb.occ_n - n) {
+                            return false;
+                        }
+                    }
+                }
+            }
+            true
+        })
+        .collect();
+    centres.into_iter().zip(below).filter(|(_, b)| *b).map(|(c, _)| c).collect()
+}
+
 /// The best match in `dict` of the patch centred on each of `centres` (every
 /// score 0 when the dictionary is empty).
 fn best_at(layers: &PatchLayers, centres: &[[u32; 3]], dict: &ExemplarPatches) -> Vec<Best> {
@@ -770,5 +822,45 @@ mod tests {
                 );
             }
         }
+    }
+    /// The voxels below a threshold are exactly those whose exhaustive best
+    /// IoU is below it, at thresholds that split the voxels.
+    #[test]
+    fn voxels_below_an_iou_are_those_of_the_exhaustive_maxima() {
+        let grid = unit_grid(64);
+        let ex = smooth_shape(&grid, Vec3::ZERO);
+        // The shape moved by a fraction of a voxel and damaged: patches at
+        // many IoUs.
+        let mut shape = smooth_shape(&grid, Vec3::new(0.4, -0.3, 0.2) * grid.voxel);
+        let mut rng = Rng::new(7);
+        for v in shape.voxels() {
+            if rng.next_u64().is_multiple_of(7) {
+                let w = shape.words_per_row();
+                let r = v[1] as usize + grid.dims[1] as usize * v[2] as usize;
+                shape.bits[r * w + v[0] as usize / 64] &= !(1u64 << (v[0] % 64));
+            }
+        }
+        // And a box of random voxels beside it: patches like nothing.
+        for z in 4..18 {
+            for y in 4..18 {
+                for x in 4..18 {
+                    if rng.next_u64() % 10 < 3 {
+                        shape.set(x, y, z);
+                    }
+                }
+            }
+        }
+        let dict = ExemplarPatches::new(&ex, 1);
+        let exhaustive = best_iou_at_every_surface_voxel(&shape, &dict);
+        for t in [0.5, 0.7, 0.85] {
+            let want: Vec<[u32; 3]> = exhaustive.iter().filter(|(_, iou)| *iou < t).map(|(c, _)| *c).collect();
+            assert!(!want.is_empty() && want.len() < exhaustive.len(), "threshold {t} splits nothing");
+            let got = surface_voxels_below_iou(&shape, &dict, t);
+            assert!(got == want, "threshold {t}: {} voxels below, {} exhaustively", got.len(), want.len());
+        }
+        // The exemplar against itself: nothing below; an empty dictionary: all.
+        assert!(surface_voxels_below_iou(&ex, &dict, 0.99).is_empty());
+        let empty = ExemplarPatches::new(&Occupancy::empty(grid.dims), 1);
+        assert_eq!(surface_voxels_below_iou(&shape, &empty, 0.5).len(), exhaustive.len());
     }
 }

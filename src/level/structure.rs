@@ -29,6 +29,15 @@ pub fn structure_level(levels: &[Level]) -> Option<&Level> {
     levels.iter().filter(|l| l.resolution <= STRUCTURE_RESOLUTION).last()
 }
 
+/// The level after the structure level (128^3 in every profile): the first
+/// the upper networks make on their own, where their ragged sheets, flakes
+/// and cracks show as surface like no part of the exemplar's same level
+/// ([`Flag::FineOutOfStyle`]). None where the levels stop at the structure
+/// level.
+pub fn fine_level(levels: &[Level]) -> Option<&Level> {
+    levels.iter().find(|l| l.resolution > STRUCTURE_RESOLUTION)
+}
+
 /// A component smaller than this share of the shape's voxels is debris, not
 /// a piece (a stray stone does not make a tower "in two pieces").
 pub const PIECE_SHARE: f64 = 0.05;
@@ -180,18 +189,16 @@ const UNLIKE_MIN_RESOLUTION: u32 = 32;
 /// ([`crate::grid::patches`], the matching of eval's LP-IoU). All false
 /// below 32^3.
 pub fn unlike_voxels(shape: &Level, exemplar: &Level) -> Vec<bool> {
-    use crate::grid::patches::{best_iou_at_every_surface_voxel, ExemplarPatches};
+    use crate::grid::patches::{surface_voxels_below_iou, ExemplarPatches};
     let mut unlike = vec![false; shape.len()];
     if shape.resolution < UNLIKE_MIN_RESOLUTION || shape.resolution != exemplar.resolution {
         return unlike;
     }
     let dictionary = ExemplarPatches::new(&voxel_set(exemplar), 1);
     let rows: VoxelMap<usize> = (0..shape.len()).filter(|&i| shape.mask[i] > 0.0).map(|i| (shape.coords[i], i)).collect();
-    for (c, iou) in best_iou_at_every_surface_voxel(&voxel_set(shape), &dictionary) {
-        if iou < UNLIKE_IOU {
-            if let Some(&i) = rows.get(IVec3::new(c[0] as i32, c[1] as i32, c[2] as i32)) {
-                unlike[i] = true;
-            }
+    for c in surface_voxels_below_iou(&voxel_set(shape), &dictionary, UNLIKE_IOU) {
+        if let Some(&i) = rows.get(IVec3::new(c[0] as i32, c[1] as i32, c[2] as i32)) {
+            unlike[i] = true;
         }
     }
     unlike
@@ -446,6 +453,10 @@ pub struct StructureParams {
     /// 0.098-0.157, those a person keeps 0-0.085; every terrain variant
     /// 0.006-0.084, every bunny variant 0-0.065; the CAD part's broken fin 0.096.
     pub max_unlike_share: f64,
+    /// The same limit on the unlike share at the level after the structure
+    /// level ([`fine_level`], 128^3, against the exemplar's same level):
+    /// fine out of style. MEASURED_FINE
+    pub max_fine_unlike_share: f64,
 }
 
 impl Default for StructureParams {
@@ -463,6 +474,7 @@ impl Default for StructureParams {
             min_exemplar_thin_share: 0.02,
             max_hole_share: 0.001,
             max_unlike_share: 0.09,
+            max_fine_unlike_share: 0.09,
         }
     }
 }
@@ -502,6 +514,10 @@ pub enum Flag {
     /// Much of its surface like no part of the exemplar: a wall fallen
     /// outward, a heap of rubble, ragged sheets.
     OutOfStyle,
+    /// The same at the level after the structure level ([`fine_level`],
+    /// 128^3): ragged sheets, flakes and cracks that the finer networks made
+    /// on a sound 64^3 level.
+    FineOutOfStyle,
     /// Nearly the exemplar itself.
     NearCopy,
 }
@@ -518,6 +534,7 @@ impl Flag {
             Flag::ThinPartLost => "thin_part_lost",
             Flag::Holed => "holed",
             Flag::OutOfStyle => "out_of_style",
+            Flag::FineOutOfStyle => "fine_out_of_style",
             Flag::NearCopy => "near_copy",
         }
     }
@@ -568,6 +585,11 @@ pub struct StructureScores {
     /// ([`unlike_share`]; 0 below 32^3).
     #[serde(default)]
     pub unlike_share: f64,
+    /// The same share at the level after the structure level
+    /// ([`fine_level`], 128^3; [`StructureScores::with_fine`]); not written
+    /// where that level was not compared.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fine_unlike_share: Option<f64>,
     /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
     /// (1: the exemplar's surface, voxel for voxel).
     pub copy_fscore: f64,
@@ -688,11 +710,35 @@ impl StructureScores {
             hole_columns,
             sheet_axis,
             unlike_share,
+            fine_unlike_share: None,
             copy_fscore,
             largest_change,
             score: terms.iter().copied().fold(1.0, f64::min),
             flags,
         }
+    }
+
+    /// These scores with the level after the structure level compared too:
+    /// `shape_fine` ([`fine_level`], 128^3) against `reference_fine`, the
+    /// exemplar's same level (bent where the shape was). Its unlike share
+    /// joins the score as one more term (the limit / the share, at most 1)
+    /// and, above [`StructureParams::max_fine_unlike_share`], flags
+    /// [`Flag::FineOutOfStyle`]. Levels of other resolutions change nothing.
+    pub fn with_fine(mut self, shape_fine: &Level, reference_fine: &Level, p: &StructureParams) -> Self {
+        if shape_fine.resolution != reference_fine.resolution || shape_fine.resolution <= self.resolution {
+            return self;
+        }
+        let share = unlike_share(shape_fine, reference_fine);
+        if share > 0.0 {
+            self.score = self.score.min((p.max_fine_unlike_share / share).min(1.0));
+        }
+        if share > p.max_fine_unlike_share {
+            // Before `near_copy`, where the other broken flags are.
+            let at = self.flags.iter().position(|f| *f == Flag::NearCopy).unwrap_or(self.flags.len());
+            self.flags.insert(at, Flag::FineOutOfStyle);
+        }
+        self.fine_unlike_share = Some(share);
+        self
     }
 
     /// No flag that says the shape is broken.
@@ -971,6 +1017,40 @@ mod tests {
         let coarse = spheres(16, &fan);
         let ball = spheres(16, &[(Vec3::ZERO, 0.55)]);
         assert_eq!(unlike_share(&coarse, &ball), 0.0);
+    }
+
+    #[test]
+    fn rods_made_at_the_fine_level_on_a_sound_structure_level_are_fine_out_of_style() {
+        let p = StructureParams::default();
+        let ball = |r| spheres(r, &[(Vec3::ZERO, 0.55)]);
+        let (exemplar, exemplar_fine) = (ball(64), ball(128));
+        let e = Structure::of(&exemplar);
+        let sound = StructureScores::new(&exemplar, &e, &exemplar, &e, &p);
+        assert!(sound.whole() && sound.fine_unlike_share.is_none(), "{sound:?}");
+        // The same ball at 128^3: nothing unlike, whole, the share recorded.
+        let same = sound.clone().with_fine(&exemplar_fine, &exemplar_fine, &p);
+        assert_eq!(same.fine_unlike_share, Some(0.0));
+        assert!(same.whole() && same.score == sound.score, "{same:?}");
+        // Thin rods (2-3 voxels across at 128^3) sticking out of the ball at
+        // 128^3 only, as a finer network's ragged flakes: flagged, the score
+        // lowered, the structure level's own flags kept (the ball against
+        // itself is a near copy).
+        let mut rods = vec![(Vec3::ZERO, 0.55)];
+        for a in (0..12).map(|k| 30.0 * k as f32) {
+            for y in [-0.5f32, 0.0, 0.5] {
+                let dir = Vec3::new(a.to_radians().cos(), y, a.to_radians().sin()).normalize();
+                rods.extend((0..15).map(|k| (dir * (0.52 + 0.02 * k as f32), 0.02)));
+            }
+        }
+        let ragged = sound.clone().with_fine(&spheres(128, &rods), &exemplar_fine, &p);
+        let share = ragged.fine_unlike_share.unwrap();
+        assert!(share > p.max_fine_unlike_share, "{ragged:?}");
+        assert_eq!(ragged.flags, vec![Flag::FineOutOfStyle, Flag::NearCopy], "{ragged:?}");
+        assert!(!ragged.whole() && ragged.score < 1.0, "{ragged:?}");
+        // A level of the structure level's resolution, or two levels that
+        // differ, compare nothing.
+        assert_eq!(sound.clone().with_fine(&exemplar, &exemplar, &p), sound);
+        assert_eq!(sound.clone().with_fine(&spheres(128, &rods), &spheres(256, &[(Vec3::ZERO, 0.55)]), &p), sound);
     }
 
     #[test]

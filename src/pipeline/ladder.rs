@@ -119,6 +119,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
             finest: l[l.len() - 1].clone(),
             coarsest: l[0].clone(),
             structure: crate::level::structure::structure_level(l).cloned(),
+            fine: crate::level::structure::fine_level(l).cloned(),
             mesh: None,
             bend: None,
         })

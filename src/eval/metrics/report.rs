@@ -125,6 +125,10 @@ pub struct ShapeInput<'a> {
     /// out-of-style patches are judged against
     /// ([`StructureScores::against_bend`]).
     pub bent_reference: Option<&'a Level>,
+    /// The level after the structure level (128^3) and the exemplar's same
+    /// level to compare it with (bent where the variant was), if both exist
+    /// ([`StructureScores::with_fine`]).
+    pub fine_level: Option<(&'a Level, &'a Level)>,
 }
 
 /// What makes a voxelisation unusable for comparison, with the shape's name.
@@ -214,7 +218,11 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
                     Some(StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure))
                 }
                 _ => None,
-            },
+            }
+            .map(|scores| match v.fine_level {
+                Some((fine, reference)) => scores.with_fine(fine, reference, &params.structure),
+                None => scores,
+            }),
             bent: v.bent_reference.is_some(),
             coarse_chamfer: cd,
         });
@@ -372,9 +380,10 @@ impl EvalReport {
         s += "(22: on the half-resolution lattice); detail: neighbour-normal angles vs the exemplar's (W1, RMS ratio);\n";
         s += "colour: colour patches matched both ways (F-score, coverage; n/a: a one-colour exemplar); chamfer0: level-0 points,\n";
         s += "normalised units; struct: the shape as a whole vs the exemplar at the structure level (1 = its structure),\n";
-        s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed, out_of_style (not whole), near_copy\n";
+        s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed, out_of_style,\n";
+        s += "fine_out_of_style (the out-of-style share on the level after, 128^3) (not whole), near_copy\n";
         if self.variants.iter().any(|v| v.bent) {
-            s += "(bent): the exemplar bent; seen_through and out_of_style are judged against the exemplar bent the same way\n";
+            s += "(bent): the exemplar bent; seen_through and the out-of-style flags are judged against the exemplar bent the same way\n";
         }
         s
     }
@@ -466,7 +475,7 @@ mod tests {
         let shifted = vec![Vec3::new(0.0, 0.1, 0.0), Vec3::new(1.0, 0.1, 0.0)];
         let (exh, v1h, parth) = (halve(&ex), halve(&v1), halve(&part));
         let (lex, lv1, lpart) = (level_of(&ex), level_of(&v1), level_of(&part));
-        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None, bent_reference: None };
+        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None, bent_reference: None, fine_level: None };
         let r = evaluate(
             &shape("exemplar", &ex, &exh, &lex, Some(&pts)),
             &[
@@ -499,13 +508,13 @@ mod tests {
         let full = Occupancy { bits: full.bits.iter().map(|&w| w & last_word_mask(16)).collect(), ..full };
         let empty = Occupancy::empty(ex.dims);
         let l = level_of(&ex);
-        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None, bent_reference: None };
+        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None, bent_reference: None, fine_level: None };
         assert!(matches!(check_shape(&shape(&empty)), Err(DegenerateShape::NoSurface(_))));
         let e = check_shape(&shape(&full)).unwrap_err();
         assert!(matches!(e, DegenerateShape::Filled(..)) && e.to_string().contains("fills 100%"), "{e}");
         assert!(check_shape(&shape(&ex)).is_ok());
         let empty_level = Level { resolution: 16, ..Default::default() };
-        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None, bent_reference: None };
+        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None, bent_reference: None, fine_level: None };
         assert!(matches!(check_shape(&s), Err(DegenerateShape::EmptyLevel(_))));
     }
 }
