@@ -30,10 +30,11 @@ pub fn structure_level(levels: &[Level]) -> Option<&Level> {
 }
 
 /// The level after the structure level (128^3 in every profile): the first
-/// the upper networks make on their own, where their ragged sheets, flakes
-/// and cracks show as surface like no part of the exemplar's same level
-/// ([`Flag::FineOutOfStyle`]). None where the levels stop at the structure
-/// level.
+/// made on a coarse shape that is already decided (by the detail transfer
+/// in the `cpu` profile, by a network where one is trained), where ragged
+/// sheets and flakes made on an unusual coarse shape show as surface like
+/// no part of the exemplar's same level ([`Flag::FineOutOfStyle`]). None
+/// where the levels stop at the structure level.
 pub fn fine_level(levels: &[Level]) -> Option<&Level> {
     levels.iter().find(|l| l.resolution > STRUCTURE_RESOLUTION)
 }
@@ -515,8 +516,8 @@ pub enum Flag {
     /// outward, a heap of rubble, ragged sheets.
     OutOfStyle,
     /// The same at the level after the structure level ([`fine_level`],
-    /// 128^3): ragged sheets, flakes and cracks that the finer networks made
-    /// on a sound 64^3 level.
+    /// 128^3): ragged sheets and flakes that the finer stage (the detail
+    /// transfer, or a network) made where the 64^3 level passes.
     FineOutOfStyle,
     /// Nearly the exemplar itself.
     NearCopy,
