@@ -442,24 +442,15 @@ pub fn best_patch_matches(shape: &Occupancy, dict: &ExemplarPatches, params: &Lp
     PatchMatches { iou: best.iter().map(Best::iou).collect(), fscore: best.iter().map(Best::fscore).collect() }
 }
 
-/// The best IoU in `dict` of the patch centred on every surface voxel of
-/// `shape` (no sampling, no cap), with the voxel, in storage order. Every IoU
-/// is 0 when the dictionary is empty.
-pub fn best_iou_at_every_surface_voxel(shape: &Occupancy, dict: &ExemplarPatches) -> Vec<([u32; 3], f64)> {
-    let layers = PatchLayers::new(shape);
-    let centres = layers.centres(1);
-    let best = best_at(&layers, &centres, dict);
-    centres.into_iter().zip(best).map(|(c, b)| (c, b.iou())).collect()
-}
-
 /// The surface voxels of `shape` whose patch overlaps no patch of `dict` with
 /// an IoU of `threshold` or more, in storage order: exactly the voxels whose
-/// [`best_iou_at_every_surface_voxel`] is below `threshold` (every voxel when
-/// the dictionary is empty), found faster. A patch stops at its first match of
+/// best IoU over the whole dictionary (the exhaustive maximum the LP matcher
+/// finds) is below `threshold` (every voxel when the dictionary is empty),
+/// without finding that maximum. A patch stops at its first match of
 /// `threshold` (an identical patch, one of 512 evenly spaced seeds, or the
 /// first dictionary patch the slab bound lets through that reaches it), so
 /// only the patches like nothing in the dictionary are compared with all of
-/// it; the IoU bound is the one of [`match_patches`].
+/// it; the IoU bound is the LP matcher's (slab histograms).
 pub fn surface_voxels_below_iou(shape: &Occupancy, dict: &ExemplarPatches, threshold: f64) -> Vec<[u32; 3]> {
     let layers = PatchLayers::new(shape);
     let centres = layers.centres(1);
@@ -823,6 +814,15 @@ mod tests {
             }
         }
     }
+    /// The best IoU in `dict` of the patch centred on every surface voxel of
+    /// `shape`, with the voxel, in storage order (the exact matcher's).
+    fn best_iou_at_every_surface_voxel(shape: &Occupancy, dict: &ExemplarPatches) -> Vec<([u32; 3], f64)> {
+        let layers = PatchLayers::new(shape);
+        let centres = layers.centres(1);
+        let best = best_at(&layers, &centres, dict);
+        centres.into_iter().zip(best).map(|(c, b)| (c, b.iou())).collect()
+    }
+
     /// The voxels below a threshold are exactly those whose exhaustive best
     /// IoU is below it, at thresholds that split the voxels.
     #[test]
