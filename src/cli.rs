@@ -208,6 +208,23 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// A local web page to steer a run's variants: look at any level of any
+    /// variant beside the exemplar, sample new ones, "more like this", resize,
+    /// edit a coarse level and regenerate the finer ones, keep what you like
+    /// (written into the run as a variant folder, meshed, in the USD asset and
+    /// eval.json). Serves on 127.0.0.1 and prints the page's address with its
+    /// token; ends on Ctrl-C (SIGINT) or SIGTERM.
+    ///
+    /// Example: shapeshifter studio out/tower --port 8765
+    Studio {
+        /// A run folder with trained models (what `run` writes).
+        dir: PathBuf,
+        /// Port on 127.0.0.1 (0: a free one).
+        #[arg(long, default_value_t = 0)]
+        port: u16,
+        #[arg(long, default_value = "auto")]
+        device: String,
+    },
     /// The whole pipeline: encode, train, sample, preview, evaluate. Several
     /// meshes: one sub-folder each; a failing mesh is reported and skipped.
     /// Re-running reuses finished stages.
@@ -903,7 +920,10 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                     edit::Edit::Copy(edit::VoxelBox::parse(&region)?, to)
                 }
             };
-            log::info!("{}", pipeline::edit_file(&input, &output, edit)?);
+            // Edited first, logged after: a log macro's arguments are not
+            // evaluated at the quiet level.
+            let what = pipeline::edit_file(&input, &output, edit)?;
+            log::info!("{what}");
             Ok(ExitCode::SUCCESS)
         }
         Command::Eval { exemplar, variants, exemplar_mesh, resolution, output, json } => {
@@ -1075,6 +1095,23 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 println!("  differs: {d}");
             }
             Ok(if report.differences.is_empty() && report.compared > 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+        }
+        Command::Studio { dir, port, device: dev } => {
+            // Interactive: one job at a time on every core, unless the
+            // thread count was given (the batch default of 1 suits processes
+            // that run side by side).
+            let given = std::env::var_os("SHAPESHIFTER_THREADS").is_some() || std::env::args().any(|a| a.starts_with("--threads"));
+            if !given {
+                tch::set_num_threads(std::thread::available_parallelism().map_or(1, |n| n.get()) as i32);
+            }
+            let request = shapeshifter::studio::StudioRequest { dir: &dir, port, device_spec: &dev, wait: cli.wait };
+            shapeshifter::studio::run_studio(&request, &mut |url| {
+                // On stdout, whatever the log level: a script reads the address.
+                println!("studio: {url}");
+                let _ = std::io::Write::flush(&mut std::io::stdout());
+                log::info!("studio: open {url} in a browser on this machine; Ctrl-C ends it");
+            })?;
+            Ok(ExitCode::SUCCESS)
         }
         Command::Ladder { dir, output, profile, device: dev } => {
             let (config, from) = pipeline::ladder_config(&dir, profile.as_deref())?;

@@ -17,6 +17,10 @@ pub enum Error {
     /// the same command resumes.
     #[error("stopped by {0}: what is on disk is whole; run the same command again to resume")]
     Stopped(&'static str),
+    /// A job was cancelled by who asked for it (the studio's cancel): it
+    /// stopped between steps and wrote nothing.
+    #[error("cancelled")]
+    Cancelled,
     #[error(transparent)]
     Torch(#[from] tch::TchError),
     #[error(transparent)]

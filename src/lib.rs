@@ -37,6 +37,7 @@ pub mod level;
 pub mod pipeline;
 pub mod recon;
 pub mod render;
+pub mod studio;
 pub mod transfer;
 // Fixtures (shapes with known answers, synthetic levels) for the tests,
 // benchmarks and tools. Always compiled, so that `cargo build` and `cargo

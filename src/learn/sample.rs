@@ -302,6 +302,23 @@ pub fn sample(
     opts: &SampleOptions,
     from: Option<Level>,
 ) -> Result<Vec<SampledVariant>> {
+    sample_observed(models, exemplar_levels, opts, from, None)
+}
+
+/// Told of every level of a variant as it is made (the variant's index, the
+/// level), coarsest first: the studio shows each level as it finishes.
+/// Levels an attempt makes and the choice among attempts passes over are not
+/// told; the kept attempt's are, once it is kept.
+pub type LevelSink<'a> = &'a (dyn Fn(usize, &Level) + Sync);
+
+/// [`sample`], telling `sink` of every level as it is made.
+pub fn sample_observed(
+    models: &Models,
+    exemplar_levels: &[Level],
+    opts: &SampleOptions,
+    from: Option<Level>,
+    sink: Option<LevelSink>,
+) -> Result<Vec<SampledVariant>> {
     if opts.n == 0 {
         return Ok(Vec::new());
     }
@@ -330,13 +347,18 @@ pub fn sample(
     }
     let box0 = level0_box(exemplar0, opts.extent)?;
     let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
+    // The exemplar's structure level judges attempts and its level 1 the
+    // level-0 candidates, which a continuation from a level has none of: not
+    // measured then (a tenth of a second of the studio's regeneration).
+    let continuing = from.is_some();
     let mut exemplar0_structure = Structure::of(exemplar0);
     // Whether level 0 is a sheet (the `holed` term of the level-0 choice) is
     // the structure level's decision, not 16^3's own.
     exemplar0_structure.sheet_axis = sheet_axes[0];
-    let reference = crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)));
+    let reference =
+        crate::level::structure::structure_level(exemplar_levels).filter(|_| !continuing).map(|l| (l, Structure::of(l)));
     // Also when sampling stops at level 0 (see `Models::upsamplers`).
-    let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts));
+    let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts)).filter(|_| !continuing);
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
     let bending = Bending::of(opts, exemplar_levels, from.is_some());
     tch::no_grad(|| {
@@ -356,6 +378,7 @@ pub fn sample(
                     exemplar1,
                     repairs: &repairs,
                     bending,
+                    told: sink.map(|f| (i, f)),
                 };
                 job.run(exemplar0.resolution, opts, from.as_ref())
             })
@@ -401,6 +424,9 @@ struct OneVariant<'a> {
     repairs: &'a [LevelRepair],
     /// Whether a pass with nothing new at level 0 is the exemplar bent.
     bending: Bending,
+    /// Who is told of each level of the variant as it is made, with the
+    /// variant's index.
+    told: Option<(usize, LevelSink<'a>)>,
 }
 
 /// Whether sampling bends a pass whose level-0 candidates are none new
@@ -797,18 +823,19 @@ impl OneVariant<'_> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
         let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
         let Some((ex_level, ex_structure)) = reference.filter(|_| attempts > 1) else {
-            let (levels, _, bend) = self.pass(self.seed, resolution0, opts, from, self.last)?;
+            let (levels, _, bend) = self.pass(self.seed, resolution0, opts, from, self.last, true)?;
             return Ok(SampledVariant { levels, bend });
         };
         let (mut levels, cur, bend) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
+        levels.iter().for_each(|l| self.tell(l));
         let next = levels.len();
         match &bend {
             // A bent pass stays the exemplar bent up to the variant's last level.
             Some(b) => {
-                self.bent_levels(b, next, self.last, &mut levels)?;
+                self.bent_levels(b, next, self.last, &mut levels, true)?;
             }
             None => {
-                self.descend(cur, next, self.last, opts, &mut levels)?;
+                self.descend(cur, next, self.last, opts, &mut levels, true)?;
             }
         }
         Ok(SampledVariant { levels, bend })
@@ -827,7 +854,7 @@ impl OneVariant<'_> {
     ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
         let params = structure_params(opts);
         let (a, rank, kept) = keep_attempt(attempts, opts.reject_copies, |a| {
-            let (levels, cur, bend) = self.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
+            let (levels, cur, bend) = self.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index, false)?;
             let level = &levels[ex_level.index];
             let rank = if level.is_empty() {
                 AttemptRank { whole: false, new: false, score: 0.0 }
@@ -872,6 +899,7 @@ impl OneVariant<'_> {
     /// `level0_seed` (or `from`, continued), the finer levels from the
     /// variant's own seed (so continuing from an unedited level reproduces
     /// the finer levels of the pass that made it, whichever attempt that was).
+    #[allow(clippy::too_many_arguments)]
     fn pass(
         &self,
         level0_seed: u64,
@@ -879,6 +907,7 @@ impl OneVariant<'_> {
         opts: &SampleOptions,
         from: Option<&Level>,
         last: usize,
+        tell: bool,
     ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
         let mut out = Vec::new();
         let mut bend = None;
@@ -886,11 +915,14 @@ impl OneVariant<'_> {
             None => match self.chosen_level0(level0_seed, resolution0, opts)? {
                 Start::Drawn(pruned, level) => {
                     let (pruned, level) = self.repaired(pruned, level)?;
+                    if tell {
+                        self.tell(&level);
+                    }
                     out.push(level);
                     (pruned, 1)
                 }
                 Start::Bent(b) => {
-                    let cur = self.bent_levels(&b, 0, last, &mut out)?.expect("level 0 at least");
+                    let cur = self.bent_levels(&b, 0, last, &mut out, tell)?.expect("level 0 at least");
                     bend = Some(b);
                     (cur, out.len())
                 }
@@ -900,8 +932,15 @@ impl OneVariant<'_> {
                 (one, level.index + 1)
             }
         };
-        let cur = self.descend(cur, first, last, opts, &mut out)?;
+        let cur = self.descend(cur, first, last, opts, &mut out, tell)?;
         Ok((out, cur, bend))
+    }
+
+    /// Tells the sink, where there is one, of a level of the variant.
+    fn tell(&self, level: &Level) {
+        if let Some((i, sink)) = self.told {
+            sink(i, level);
+        }
     }
 
     /// Levels `first..=last` (at most the variant's last) of the exemplar
@@ -909,13 +948,16 @@ impl OneVariant<'_> {
     /// no network runs on a bent pass); each through the tensor, so its rows
     /// are in the grid's order. The last one's pruned tensor; None when
     /// there is no level to make.
-    fn bent_levels(&self, bend: &Bend, first: usize, last: usize, out: &mut Vec<Level>) -> Result<Option<SparseTensor>> {
+    fn bent_levels(&self, bend: &Bend, first: usize, last: usize, out: &mut Vec<Level>, tell: bool) -> Result<Option<SparseTensor>> {
         let mut cur = None;
         for l in first..=last.min(self.last) {
             let bent = bend.bent(self.exemplar_levels, l);
             let pruned = SparseTensor::from_level(&bent, self.models.device)?.prune_by_mask()?;
             let level = pruned.to_level(l, self.frame)?;
             let (pruned, level) = self.repaired(pruned, level)?;
+            if tell {
+                self.tell(&level);
+            }
             out.push(level);
             cur = Some(pruned);
         }
@@ -925,7 +967,7 @@ impl OneVariant<'_> {
     /// Levels `first..=last` (at most the variant's last) from the pruned
     /// level below them, `cur`, appended to `out`; the last one's pruned
     /// tensor.
-    fn descend(&self, mut cur: SparseTensor, first: usize, last: usize, opts: &SampleOptions, out: &mut Vec<Level>) -> Result<SparseTensor> {
+    fn descend(&self, mut cur: SparseTensor, first: usize, last: usize, opts: &SampleOptions, out: &mut Vec<Level>, tell: bool) -> Result<SparseTensor> {
         let (seed, dev) = (self.seed, self.models.device);
         for l in first..=last.min(self.last) {
             if cur.is_empty() {
@@ -933,7 +975,11 @@ impl OneVariant<'_> {
                     Arc::new(SparseGrid::empty(cur.grid.resolution() * 2)),
                     Tensor::zeros([0, FEATURE_CHANNELS as i64], (Kind::Float, dev)),
                 )?;
-                out.push(empty.to_level(l, self.frame)?);
+                let level = empty.to_level(l, self.frame)?;
+                if tell {
+                    self.tell(&level);
+                }
+                out.push(level);
                 cur = empty;
                 continue;
             }
@@ -947,6 +993,9 @@ impl OneVariant<'_> {
             let pruned = x.prune_by_mask()?;
             let level = pruned.to_level(l, self.frame)?;
             let (pruned, level) = self.repaired(pruned, level)?;
+            if tell {
+                self.tell(&level);
+            }
             cur = pruned;
             out.push(level);
         }

@@ -64,13 +64,10 @@ pub fn delete_box(level: &mut Level, region: VoxelBox) -> Result<usize> {
     }
 }
 
-/// Copies the voxels inside `region` so that `region.min` lands on `to`,
-/// features included (offsets are relative to the voxel, so the surface moves
-/// with it). Voxels already at the destination are replaced. Returns how many
-/// voxels were copied.
-pub fn copy_box(level: &mut Level, region: VoxelBox, to: IVec3) -> Result<usize> {
-    let shift = to - region.min;
-    let res = level.resolution as i32;
+/// The voxels of `level` inside `region`, with their features (a copied
+/// piece, as the studio's clipboard holds it). A box that holds none is an
+/// error.
+pub fn piece(level: &Level, region: VoxelBox) -> Result<Level> {
     let picked: Vec<usize> = (0..level.len()).filter(|&i| region.contains(level.coords[i])).collect();
     if picked.is_empty() {
         return Err(Error::Invalid(format!(
@@ -79,26 +76,59 @@ pub fn copy_box(level: &mut Level, region: VoxelBox, to: IVec3) -> Result<usize>
             fmt(region.max)
         )));
     }
-    for &i in &picked {
-        let c = level.coords[i] + shift;
-        if c.min_element() < 0 || c.max_element() >= res {
+    Ok(level.rows(&picked))
+}
+
+/// Pastes `piece` (voxels of a level of the same resolution) into `level`
+/// shifted by `shift` voxels, features included (offsets are relative to the
+/// voxel, so the surface moves with it). Voxels already at the destination
+/// are replaced. A piece that would leave the grid is an error and changes
+/// nothing. Returns how many voxels were pasted.
+pub fn paste(level: &mut Level, piece: &Level, shift: IVec3) -> Result<usize> {
+    let res = level.resolution as i32;
+    if piece.resolution != level.resolution {
+        return Err(Error::Invalid(format!(
+            "a piece of a {}^3 level cannot be pasted into a {res}^3 level",
+            piece.resolution
+        )));
+    }
+    for &c in &piece.coords {
+        let to = c + shift;
+        if to.min_element() < 0 || to.max_element() >= res {
             return Err(Error::Invalid(format!(
-                "the copy would leave the level's {res}^3 grid (voxel {} -> {})",
-                fmt(level.coords[i]),
-                fmt(c)
+                "the paste would leave the level's {res}^3 grid (voxel {} -> {})",
+                fmt(c),
+                fmt(to)
             )));
         }
     }
-    let copies: Vec<(IVec3, usize)> = picked.iter().map(|&i| (level.coords[i] + shift, i)).collect();
-    let dest: VoxelMap<usize> = copies.iter().copied().collect();
-    // Drop voxels that the copy overwrites, then append the copies.
-    let src = level.clone();
+    let dest: VoxelMap<()> = piece.coords.iter().map(|&c| (c + shift, ())).collect();
     let coords = level.coords.clone();
     level.retain(|i| !dest.contains(coords[i]));
-    for (c, i) in copies {
-        level.push_row(&src, i, c);
+    for (i, &c) in piece.coords.iter().enumerate() {
+        level.push_row(piece, i, c + shift);
     }
-    Ok(picked.len())
+    Ok(piece.len())
+}
+
+/// Copies the voxels inside `region` so that `region.min` lands on `to`
+/// ([`piece`] then [`paste`]). Returns how many voxels were copied.
+pub fn copy_box(level: &mut Level, region: VoxelBox, to: IVec3) -> Result<usize> {
+    let piece = piece(level, region)?;
+    paste(level, &piece, to - region.min)
+}
+
+/// Moves the voxels inside `region` by `shift` voxels: they leave their place
+/// (which becomes empty) and replace what is at the destination. Returns how
+/// many voxels moved.
+pub fn move_box(level: &mut Level, region: VoxelBox, shift: IVec3) -> Result<usize> {
+    let piece = piece(level, region)?;
+    let mut moved = level.clone();
+    let coords = moved.coords.clone();
+    moved.retain(|i| !region.contains(coords[i]));
+    let n = paste(&mut moved, &piece, shift)?;
+    *level = moved;
+    Ok(n)
 }
 
 /// One edit of a level file (the `edit` command).
@@ -168,5 +198,28 @@ mod tests {
         assert!(copy_box(&mut l, region, IVec3::new(15, 0, 0)).is_err(), "out of the grid");
         let empty = VoxelBox { min: IVec3::splat(9), max: IVec3::splat(10) };
         assert!(copy_box(&mut l, empty, IVec3::ZERO).is_err());
+    }
+
+    #[test]
+    fn move_empties_the_source_and_paste_refuses_to_leave_the_grid() {
+        let mut l = line_level();
+        let region = VoxelBox { min: IVec3::new(0, 0, 0), max: IVec3::new(1, 0, 0) };
+        assert_eq!(move_box(&mut l, region, IVec3::new(0, 5, 0)).unwrap(), 2);
+        let mut coords = l.coords.clone();
+        coords.sort_by_key(|c| (c.x, c.y, c.z));
+        assert_eq!(coords, vec![IVec3::new(0, 5, 0), IVec3::new(1, 5, 0), IVec3::new(2, 0, 0), IVec3::new(3, 0, 0)]);
+        let at = |l: &Level, c: IVec3| l.coords.iter().position(|&x| x == c).unwrap();
+        assert_eq!(l.offsets[at(&l, IVec3::new(1, 5, 0))], Vec3::new(0.1, 0.0, 0.0), "features move with the voxel");
+        // Off the grid: an error, nothing changed.
+        let before = l.coords.clone();
+        let right = VoxelBox { min: IVec3::new(2, 0, 0), max: IVec3::new(3, 0, 0) };
+        assert!(move_box(&mut l, right, IVec3::new(0, 20, 0)).unwrap_err().to_string().contains("leave"));
+        let p = piece(&l, VoxelBox { min: IVec3::ZERO, max: IVec3::splat(15) }).unwrap();
+        assert!(paste(&mut l, &p, IVec3::new(-3, 0, 0)).is_err());
+        assert_eq!(l.coords, before);
+        // A piece of another resolution is refused.
+        let mut other = line_level();
+        other.resolution = 32;
+        assert!(paste(&mut l, &other, IVec3::ZERO).unwrap_err().to_string().contains("32^3"));
     }
 }

@@ -539,6 +539,13 @@ impl Flag {
             Flag::NearCopy => "near_copy",
         }
     }
+    /// The flag of a name [`Flag::name`] gives (as eval.json writes it).
+    pub fn from_name(name: &str) -> Option<Flag> {
+        use Flag::*;
+        [Fragment, Shrunken, Pieces, Torn, Open, SeenThrough, ThinPartLost, Holed, OutOfStyle, FineOutOfStyle, NearCopy]
+            .into_iter()
+            .find(|f| f.name() == name)
+    }
     /// Whether the flag says the shape is not whole (a near copy is whole,
     /// just not new).
     pub fn broken(self) -> bool {

@@ -16,6 +16,7 @@ pub mod cluster;
 pub mod edit;
 pub mod encode;
 pub mod evaluate;
+pub mod keep;
 pub mod ladder;
 pub mod layout;
 pub mod mesh;

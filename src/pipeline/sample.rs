@@ -263,6 +263,19 @@ pub fn sample_variants(
     opts: &SampleOptions,
     from: Option<Level>,
 ) -> Result<Vec<sample::SampledVariant>> {
+    sample_variants_observed(models, exemplar_levels, opts, from, None)
+}
+
+/// [`sample_variants`], telling `sink` of every level of every variant as it
+/// is made, network levels and transferred ones alike (the studio shows each
+/// level as it finishes).
+pub fn sample_variants_observed(
+    models: &sample::Models,
+    exemplar_levels: &[Level],
+    opts: &SampleOptions,
+    from: Option<Level>,
+    sink: Option<sample::LevelSink>,
+) -> Result<Vec<sample::SampledVariant>> {
     let count = exemplar_levels.len();
     let last = opts.stop_level.unwrap_or(count.saturating_sub(1));
     if last >= count {
@@ -287,7 +300,7 @@ pub fn sample_variants(
         Some(level) if level.index >= diffusion_last && level.index < last => {
             vec![sample::SampledVariant { levels: Vec::new(), bend: None }; opts.n]
         }
-        _ => sample::sample(models, exemplar_levels, &SampleOptions { stop_level: Some(diffusion_last), ..opts.clone() }, from.clone())?,
+        _ => sample::sample_observed(models, exemplar_levels, &SampleOptions { stop_level: Some(diffusion_last), ..opts.clone() }, from.clone(), sink)?,
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
@@ -307,7 +320,13 @@ pub fn sample_variants(
                     .collect()
             });
             let source = bent_source.as_deref().unwrap_or(exemplar_levels);
-            let finer = crate::transfer::extend(source, coarse, last, config, seed, &repairs)?;
+            let index = opts.first + i;
+            let mut tell = |l: &Level| {
+                if let Some(sink) = sink {
+                    sink(index, l)
+                }
+            };
+            let finer = crate::transfer::extend_observed(source, coarse, last, config, seed, &repairs, &mut tell)?;
             v.levels.extend(finer);
         }
     }

@@ -415,6 +415,20 @@ pub fn extend(
     seed: u64,
     repairs: &[crate::level::repair::LevelRepair],
 ) -> Result<Vec<Level>, TransferError> {
+    extend_observed(exemplar_levels, coarse, last, cfg, seed, repairs, &mut |_| {})
+}
+
+/// [`extend`], telling `on_level` of every level as it is made (the studio
+/// shows each as it finishes).
+pub fn extend_observed(
+    exemplar_levels: &[Level],
+    coarse: &Level,
+    last: usize,
+    cfg: &TransferConfig,
+    seed: u64,
+    repairs: &[crate::level::repair::LevelRepair],
+    on_level: &mut dyn FnMut(&Level),
+) -> Result<Vec<Level>, TransferError> {
     if last >= exemplar_levels.len() {
         return Err(TransferError::Invalid(format!(
             "level {last} asked for, the exemplar has levels 0..{}",
@@ -446,6 +460,7 @@ pub fn extend(
         }
         log::info!("transfer: level {l} ({}^3, {} voxels) in {:.2} s", level.resolution, level.len(), t.elapsed().as_secs_f64());
         sources = Some(copied);
+        on_level(&level);
         out.push(level);
     }
     Ok(out)

@@ -91,10 +91,29 @@ pub fn requested() -> Option<i32> {
 
 /// `Err(Error::Stopped)` once a stop was asked for: for loops between steps.
 pub fn check() -> Result<()> {
-    match requested() {
-        Some(sig) => Err(Error::Stopped(name(sig))),
-        None => Ok(()),
+    if let Some(sig) = requested() {
+        return Err(Error::Stopped(name(sig)));
     }
+    if CANCEL.with(|c| c.borrow().as_ref().is_some_and(|flag| flag.load(Ordering::SeqCst))) {
+        return Err(Error::Cancelled);
+    }
+    Ok(())
+}
+
+thread_local! {
+    /// This thread's cancel flag, where its work can be cancelled on its
+    /// own (a studio job); [`check`] reads it beside the stop signal.
+    static CANCEL: std::cell::RefCell<Option<std::sync::Arc<std::sync::atomic::AtomicBool>>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `f` on this thread with `flag` as its cancel flag: once the flag is
+/// raised, [`check`] (between sampling steps, variants, levels) returns
+/// [`Error::Cancelled`].
+pub fn cancellable<T>(flag: std::sync::Arc<std::sync::atomic::AtomicBool>, f: impl FnOnce() -> T) -> T {
+    let before = CANCEL.with(|c| c.replace(Some(flag)));
+    let out = f();
+    CANCEL.with(|c| *c.borrow_mut() = before);
+    out
 }
 
 /// The signal's name (SIGTERM, SIGINT).

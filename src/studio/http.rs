@@ -1,0 +1,322 @@
+//! The studio's local HTTP server (tiny_http): bound to 127.0.0.1, every
+//! request carries the session's token (the `?token=` of the printed URL,
+//! then a cookie the page gets, or an `X-Studio-Token` header), a Host header
+//! other than localhost or 127.0.0.1 is refused (DNS rebinding), and only
+//! the routes below answer: nothing is served by path from the disk, so
+//! nothing outside the run folder can be reached. A bad request gets a 4xx
+//! with a one-line message and changes nothing.
+
+use std::io::{Cursor, Read};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use serde::Serialize;
+use tiny_http::{Header, Method, Request, Response, Server};
+
+use crate::error::{Error, Result};
+
+use super::shapes::{is_unknown, points_payload};
+use super::{EditRequest, JobRequest, Studio};
+
+/// Largest request body read (an edit or a job is a few hundred bytes).
+pub const MAX_BODY: usize = 64 * 1024;
+/// Threads answering requests (jobs run on the studio's worker, so these
+/// stay free while one runs).
+pub const HANDLERS: usize = 8;
+
+/// How the studio is served.
+pub struct ServeOptions {
+    /// 0: a free port chosen by the system.
+    pub port: u16,
+    /// The session token (random when None).
+    pub token: Option<String>,
+}
+
+/// A served studio: its address and token.
+pub struct Served {
+    pub port: u16,
+    pub token: String,
+    server: Arc<Server>,
+    stop: Arc<AtomicBool>,
+    handlers: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl Served {
+    /// The page's address with the token.
+    pub fn url(&self) -> String {
+        format!("http://127.0.0.1:{}/?token={}", self.port, self.token)
+    }
+
+    /// Stops answering: the handler threads end after the request they are on.
+    pub fn stop(self) {
+        self.stop.store(true, Ordering::SeqCst);
+        self.server.unblock();
+        for h in self.handlers {
+            let _ = h.join();
+        }
+    }
+}
+
+/// Binds 127.0.0.1:`port` and answers requests for `studio` on
+/// [`HANDLERS`] threads until [`Served::stop`].
+pub fn serve(studio: Arc<Studio>, options: ServeOptions) -> Result<Served> {
+    let server = Server::http(("127.0.0.1", options.port))
+        .map_err(|e| Error::Usage(format!("cannot listen on 127.0.0.1:{}: {e}", options.port)))?;
+    let port = server.server_addr().to_ip().map(|a| a.port()).unwrap_or(options.port);
+    let token = options.token.unwrap_or_else(new_token);
+    let server = Arc::new(server);
+    let stop = Arc::new(AtomicBool::new(false));
+    let handlers = (0..HANDLERS)
+        .map(|k| {
+            let (server, stop, studio, token) = (server.clone(), stop.clone(), studio.clone(), token.clone());
+            std::thread::Builder::new()
+                .name(format!("studio-http-{k}"))
+                .spawn(move || {
+                    while !stop.load(Ordering::SeqCst) {
+                        match server.recv_timeout(Duration::from_millis(250)) {
+                            Ok(Some(request)) => answer(&studio, &token, port, request),
+                            Ok(None) => {}
+                            Err(_) => break,
+                        }
+                    }
+                })
+                .expect("a thread starts")
+        })
+        .collect();
+    Ok(Served { port, token, server, stop, handlers })
+}
+
+/// 32 hex digits from the operating system's random source.
+pub fn new_token() -> String {
+    let mut b = [0u8; 16];
+    if let Ok(mut f) = std::fs::File::open("/dev/urandom") {
+        let _ = f.read_exact(&mut b);
+    }
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+/// An answer: status, content type, body, extra headers.
+struct Reply {
+    status: u16,
+    content_type: &'static str,
+    body: Vec<u8>,
+    headers: Vec<(String, String)>,
+}
+
+impl Reply {
+    fn json<T: Serialize>(value: &T) -> Reply {
+        Reply { status: 200, content_type: "application/json", body: serde_json::to_vec(value).unwrap_or_default(), headers: Vec::new() }
+    }
+    fn bytes(content_type: &'static str, body: Vec<u8>) -> Reply {
+        Reply { status: 200, content_type, body, headers: Vec::new() }
+    }
+    fn error(status: u16, message: &str) -> Reply {
+        let body = serde_json::to_vec(&serde_json::json!({ "error": crate::error::one_line(message) })).unwrap_or_default();
+        Reply { status, content_type: "application/json", body, headers: Vec::new() }
+    }
+}
+
+/// The status for a library error: unknown ids 404, the rest of the user's
+/// mistakes 400, a stop 503.
+fn status_of(e: &Error) -> u16 {
+    match e {
+        _ if is_unknown(e) => 404,
+        Error::Invalid(_) | Error::Usage(_) => 400,
+        Error::Stopped(_) => 503,
+        _ => 500,
+    }
+}
+
+fn from_result(r: Result<Reply>) -> Reply {
+    r.unwrap_or_else(|e| Reply::error(status_of(&e), &e.to_string()))
+}
+
+fn header<'a>(request: &'a Request, name: &str) -> Option<&'a str> {
+    request.headers().iter().find(|h| h.field.as_str().as_str().eq_ignore_ascii_case(name)).map(|h| h.value.as_str())
+}
+
+/// Whether the Host header names this machine's loopback (with or without
+/// the port): a page of another site that rebinds its name to 127.0.0.1
+/// sends its own name and is refused.
+pub fn host_allowed(host: Option<&str>, port: u16) -> bool {
+    let Some(host) = host else { return false };
+    let (name, p) = match host.rsplit_once(':') {
+        Some((n, p)) if !n.ends_with(']') || n.starts_with('[') => (n, Some(p)),
+        _ => (host, None),
+    };
+    let port_ok = p.is_none_or(|p| p.parse::<u16>().ok() == Some(port));
+    port_ok && matches!(name.to_ascii_lowercase().as_str(), "localhost" | "127.0.0.1")
+}
+
+fn cookie_name(port: u16) -> String {
+    format!("shapeshifter_studio_{port}")
+}
+
+/// The token a request carries: `?token=`, the `X-Studio-Token` header, or
+/// the studio's cookie.
+fn token_of(request: &Request, port: u16) -> Option<String> {
+    let query = request.url().split_once('?').map(|(_, q)| q).unwrap_or("");
+    if let Some(t) = query.split('&').find_map(|kv| kv.strip_prefix("token=")) {
+        return Some(t.to_string());
+    }
+    if let Some(t) = header(request, "X-Studio-Token") {
+        return Some(t.to_string());
+    }
+    let name = cookie_name(port);
+    header(request, "Cookie")?.split(';').find_map(|c| c.trim().strip_prefix(&format!("{name}=")).map(str::to_string))
+}
+
+/// Compares without stopping at the first difference.
+fn same(a: &str, b: &str) -> bool {
+    a.len() == b.len() && a.bytes().zip(b.bytes()).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+fn answer(studio: &Studio, token: &str, port: u16, mut request: Request) {
+    let reply = if !host_allowed(header(&request, "Host"), port) {
+        Reply::error(403, "this studio answers only requests addressed to localhost or 127.0.0.1")
+    } else if !token_of(&request, port).is_some_and(|t| same(&t, token)) {
+        Reply::error(403, "missing or wrong token: open the address the studio printed (with its ?token=)")
+    } else {
+        let body = read_body(&mut request);
+        match body {
+            Ok(body) => route(studio, &request, &body, token, port),
+            Err(reply) => reply,
+        }
+    };
+    let mut response = Response::new(
+        tiny_http::StatusCode(reply.status),
+        Vec::new(),
+        Cursor::new(reply.body.clone()),
+        Some(reply.body.len()),
+        None,
+    )
+    .with_header(Header::from_bytes("Content-Type", reply.content_type).expect("a valid header"))
+    .with_header(Header::from_bytes("Cache-Control", "no-store").expect("a valid header"))
+    .with_header(Header::from_bytes("X-Content-Type-Options", "nosniff").expect("a valid header"));
+    for (k, v) in &reply.headers {
+        if let Ok(h) = Header::from_bytes(k.as_bytes(), v.as_bytes()) {
+            response = response.with_header(h);
+        }
+    }
+    let _ = request.respond(response);
+}
+
+fn read_body(request: &mut Request) -> std::result::Result<Vec<u8>, Reply> {
+    if request.body_length().is_some_and(|n| n > MAX_BODY) {
+        return Err(Reply::error(413, &format!("request body over {MAX_BODY} bytes")));
+    }
+    let mut body = Vec::new();
+    let read = request.as_reader().take(MAX_BODY as u64 + 1).read_to_end(&mut body);
+    match read {
+        Err(e) => Err(Reply::error(400, &format!("cannot read the request body: {e}"))),
+        Ok(_) if body.len() > MAX_BODY => Err(Reply::error(413, &format!("request body over {MAX_BODY} bytes"))),
+        Ok(_) => Ok(body),
+    }
+}
+
+fn parse<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T> {
+    serde_json::from_slice(body).map_err(|e| Error::Invalid(format!("malformed request: {e}")))
+}
+
+fn route(studio: &Studio, request: &Request, body: &[u8], token: &str, port: u16) -> Reply {
+    let path = request.url().split('?').next().unwrap_or("/");
+    let parts: Vec<&str> = path.trim_matches('/').split('/').filter(|p| !p.is_empty()).collect();
+    let get = *request.method() == Method::Get;
+    let post = *request.method() == Method::Post;
+    match (parts.as_slice(), get, post) {
+        ([], true, _) | (["index.html"], true, _) => {
+            let mut r = Reply::bytes("text/html; charset=utf-8", super::assets::page(token).into_bytes());
+            // The page's own requests (scripts, data) carry the token as a
+            // cookie of this port, never sent to another site.
+            r.headers.push(("Set-Cookie".into(), format!("{}={token}; Path=/; HttpOnly; SameSite=Strict", cookie_name(port))));
+            r
+        }
+        (["assets", name], true, _) => match super::assets::asset(name) {
+            Some((content_type, bytes)) => Reply::bytes(content_type, bytes.to_vec()),
+            None => Reply::error(404, &format!("no asset '{}'", crate::error::one_line(name))),
+        },
+        (["api", "state"], true, _) => Reply::json(&studio.state()),
+        (["api", "shapes", id, "levels", k, "points"], true, _) => from_result((|| {
+            let k: usize = k.parse().map_err(|_| Error::Invalid(format!("level '{k}' is not a number")))?;
+            let level = if id.starts_with('d') {
+                let l = studio.draft_level(id)?;
+                if l.index != k {
+                    return Err(Error::Invalid(format!("{id} is an edit of level {}, not {k}", l.index)));
+                }
+                l
+            } else {
+                (*studio.gallery.level(id, k)?).clone()
+            };
+            Ok(Reply::bytes("application/octet-stream", points_payload(&level)))
+        })()),
+        (["api", "shapes", id, "preview.png"], true, _) => from_result(studio.preview(id).map(|png| Reply::bytes("image/png", (*png).clone()))),
+        (["api", "shapes", id, "mesh.ply"], true, _) => from_result((|| {
+            let folder = studio.gallery.with(id, |s| Ok(s.folder().map(Path::to_path_buf)))?;
+            let path = folder.map(|f| f.join(crate::pipeline::layout::MESH_PLY)).filter(|p| p.is_file());
+            let path = path.ok_or_else(|| Error::Invalid(format!("{id} has no mesh (a session variant is meshed when kept)")))?;
+            let bytes = std::fs::read(&path).map_err(|e| Error::file(&path, e.to_string()))?;
+            Ok(Reply::bytes("application/octet-stream", bytes))
+        })()),
+        (["api", "shapes", id, "discard"], _, true) => from_result(studio.gallery.discard(id).map(|_| Reply::json(&serde_json::json!({"discarded": id})))),
+        (["api", "drafts"], _, true) => from_result((|| {
+            #[derive(serde::Deserialize)]
+            #[serde(deny_unknown_fields)]
+            struct NewDraft {
+                source: String,
+                level: usize,
+            }
+            let r: NewDraft = parse(body)?;
+            Ok(Reply::json(&studio.new_draft(&r.source, r.level)?))
+        })()),
+        (["api", "drafts", id, "edit"], _, true) => from_result((|| {
+            let edit: EditRequest = parse(body)?;
+            let (what, draft) = studio.edit(id, &edit)?;
+            Ok(Reply::json(&serde_json::json!({ "did": what, "draft": draft })))
+        })()),
+        (["api", "drafts", id, "discard"], _, true) => from_result(studio.discard_draft(id).map(|_| Reply::json(&serde_json::json!({"discarded": id})))),
+        (["api", "jobs"], _, true) => from_result((|| {
+            let job: JobRequest = parse(body)?;
+            let id = studio.submit(job)?;
+            let mut r = Reply::json(&studio.jobs.get(&id));
+            r.status = 202;
+            Ok(r)
+        })()),
+        (["api", "jobs", id], true, _) => match studio.jobs.get(id) {
+            Some(j) => Reply::json(&j),
+            None => Reply::error(404, &format!("no job '{}'", crate::error::one_line(id))),
+        },
+        (["api", "jobs", id, "cancel"], _, true) => from_result(studio.jobs.cancel(id).map(|j| Reply::json(&j))),
+        (_, false, false) => Reply::error(405, "only GET and POST are answered"),
+        _ => Reply::error(404, &format!("no such page or call: {}", crate::error::one_line(path))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_loopback_names_on_our_port_are_allowed_hosts() {
+        assert!(host_allowed(Some("127.0.0.1:8080"), 8080));
+        assert!(host_allowed(Some("localhost:8080"), 8080));
+        assert!(host_allowed(Some("LOCALHOST"), 8080));
+        assert!(!host_allowed(Some("localhost:8081"), 8080));
+        assert!(!host_allowed(Some("evil.example:8080"), 8080));
+        assert!(!host_allowed(Some("127.0.0.1.evil.example:8080"), 8080));
+        assert!(!host_allowed(Some("localhost.:8080"), 8080));
+        assert!(!host_allowed(None, 8080));
+    }
+
+    #[test]
+    fn tokens_are_random_hex_and_compared_whole() {
+        let (a, b) = (new_token(), new_token());
+        assert_eq!(a.len(), 32);
+        assert!(a.chars().all(|c| c.is_ascii_hexdigit()));
+        assert_ne!(a, b);
+        assert!(same(&a, &a.clone()));
+        assert!(!same(&a, &b));
+        assert!(!same(&a, &a[..31]));
+    }
+}

@@ -1,0 +1,403 @@
+//! The studio's jobs: sampling new variants, "more like this", regenerating
+//! an edit's finer levels, keeping a variant. One worker thread owns the
+//! trained networks and runs one job at a time, in the order they were
+//! asked for (a second job queues; it never shares the cores unseen with
+//! the first). Each level a job makes is added to its shape as it finishes,
+//! so the page shows it at once. A job is cancelled between sampling steps.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, Sender};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::learn::sample::{load_models, variant_seed, Models, SampleOptions};
+use crate::level::Level;
+use crate::pipeline::sample::{models_needed, sample_variants_observed};
+
+use super::shapes::{judge, SeedOf, StudioRecord, STUDIO_RECORD};
+use super::Studio;
+
+/// What a job does, with everything it needs taken when it was asked for
+/// (a later edit of the draft does not change a queued job).
+#[derive(Clone, Debug)]
+pub enum Work {
+    /// `n` new variants from fresh seeds: variants 0..n of the run seed
+    /// `seed`, the level-0 box scaled by `extent` (the paper's resize).
+    Sample { n: usize, seed: u64, extent: [f32; 3] },
+    /// `n` variants that keep `source`'s levels up to `keep_level` and
+    /// sample the finer ones from new seeds.
+    MoreLike { source: String, levels: Vec<Arc<Level>>, n: usize, seed: u64 },
+    /// The finer levels of an edited level, from the source's own seed (the
+    /// unedited parts come back as they were).
+    Regenerate { draft: String, source: String, level: Level, seed: Option<SeedOf> },
+    /// Writes a session variant into the run as a variant folder.
+    Keep { shape: String },
+}
+
+impl Work {
+    fn kind(&self) -> &'static str {
+        match self {
+            Work::Sample { .. } => "sample",
+            Work::MoreLike { .. } => "more_like",
+            Work::Regenerate { .. } => "regenerate",
+            Work::Keep { .. } => "keep",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum JobState {
+    Queued,
+    Running,
+    Done,
+    Failed,
+    Cancelled,
+}
+
+/// When a level of a job's output was ready, seconds after the job started
+/// running (and after it was asked for).
+#[derive(Clone, Debug, Serialize)]
+pub struct LevelReady {
+    pub shape: String,
+    pub level: usize,
+    pub resolution: u32,
+    pub voxels: usize,
+    pub seconds: f64,
+    pub since_asked: f64,
+}
+
+/// A job as the page sees it.
+#[derive(Clone, Debug, Serialize)]
+pub struct JobStatus {
+    pub id: String,
+    pub kind: &'static str,
+    pub state: JobState,
+    /// What it is doing, or why it failed.
+    pub message: String,
+    /// The shapes it made (session variant ids; a kept folder's name).
+    pub outputs: Vec<String>,
+    /// Levels made so far over levels to make (0 to 1).
+    pub progress: f64,
+    pub levels: Vec<LevelReady>,
+    pub seconds: f64,
+    #[serde(skip)]
+    cancel: Arc<AtomicBool>,
+    #[serde(skip)]
+    asked: Instant,
+}
+
+/// The queue and every job's status.
+pub struct Jobs {
+    status: Mutex<Vec<JobStatus>>,
+    /// Signalled on every change (tests and the benchmark wait on it).
+    changed: Condvar,
+    queue: Mutex<Option<Sender<(String, Work)>>>,
+    next: Mutex<usize>,
+}
+
+impl Jobs {
+    pub fn new() -> (Jobs, Receiver<(String, Work)>) {
+        let (tx, rx) = std::sync::mpsc::channel();
+        (Jobs { status: Mutex::new(Vec::new()), changed: Condvar::new(), queue: Mutex::new(Some(tx)), next: Mutex::new(1) }, rx)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<JobStatus>> {
+        self.status.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Queues `work`; its id.
+    pub fn submit(&self, work: Work) -> Result<String> {
+        let id = {
+            let mut n = self.next.lock().unwrap_or_else(|e| e.into_inner());
+            let id = format!("j{n}");
+            *n += 1;
+            id
+        };
+        self.lock().push(JobStatus {
+            id: id.clone(),
+            kind: work.kind(),
+            state: JobState::Queued,
+            message: "queued".into(),
+            outputs: Vec::new(),
+            progress: 0.0,
+            levels: Vec::new(),
+            seconds: 0.0,
+            cancel: Arc::new(AtomicBool::new(false)),
+            asked: Instant::now(),
+        });
+        let queue = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        queue
+            .as_ref()
+            .ok_or_else(|| Error::Invalid("the studio is stopping: no new jobs".into()))?
+            .send((id.clone(), work))
+            .map_err(|_| Error::Invalid("the studio's worker has stopped".into()))?;
+        self.changed.notify_all();
+        Ok(id)
+    }
+
+    pub fn list(&self) -> Vec<JobStatus> {
+        self.lock().clone()
+    }
+
+    pub fn get(&self, id: &str) -> Option<JobStatus> {
+        self.lock().iter().find(|j| j.id == id).cloned()
+    }
+
+    /// Cancels a queued or running job (a finished one stays as it ended).
+    pub fn cancel(&self, id: &str) -> Result<JobStatus> {
+        let mut jobs = self.lock();
+        let job = jobs.iter_mut().find(|j| j.id == id).ok_or_else(|| super::shapes::unknown(id))?;
+        job.cancel.store(true, Ordering::SeqCst);
+        if job.state == JobState::Queued {
+            job.state = JobState::Cancelled;
+            job.message = "cancelled before it started".into();
+        }
+        let out = job.clone();
+        drop(jobs);
+        self.changed.notify_all();
+        Ok(out)
+    }
+
+    /// Stops taking jobs and cancels those queued or running (the studio is
+    /// ending).
+    pub fn close(&self) {
+        self.queue.lock().unwrap_or_else(|e| e.into_inner()).take();
+        for j in self.lock().iter() {
+            j.cancel.store(true, Ordering::SeqCst);
+        }
+        self.changed.notify_all();
+    }
+
+    fn update(&self, id: &str, f: impl FnOnce(&mut JobStatus)) {
+        if let Some(j) = self.lock().iter_mut().find(|j| j.id == id) {
+            f(j);
+        }
+        self.changed.notify_all();
+    }
+
+    /// Waits until `done` holds of job `id`'s status or `timeout` passes;
+    /// the status then.
+    pub fn wait_for(&self, id: &str, timeout: std::time::Duration, done: impl Fn(&JobStatus) -> bool) -> Option<JobStatus> {
+        let end = Instant::now() + timeout;
+        let mut jobs = self.lock();
+        loop {
+            let job = jobs.iter().find(|j| j.id == id)?;
+            if done(job) {
+                return Some(job.clone());
+            }
+            let left = end.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Some(job.clone());
+            }
+            jobs = self.changed.wait_timeout(jobs, left).unwrap_or_else(|e| e.into_inner()).0;
+        }
+    }
+}
+
+impl JobStatus {
+    pub fn finished(&self) -> bool {
+        matches!(self.state, JobState::Done | JobState::Failed | JobState::Cancelled)
+    }
+}
+
+/// The worker: loads the networks, then runs the jobs `rx` brings one at a
+/// time until the queue closes.
+pub fn worker(studio: Arc<Studio>, rx: Receiver<(String, Work)>) {
+    let models = (|| {
+        let config = &studio.config;
+        let needed = models_needed(config, &studio.exemplar, None);
+        load_models(&studio.paths.models(), config, needed, studio.device)
+    })();
+    let models = match models {
+        Ok(m) => Some(m),
+        Err(e) => {
+            log::error!("studio: the networks cannot be loaded: {e}");
+            *studio.load_error.lock().unwrap_or_else(|e| e.into_inner()) = Some(e.to_string());
+            None
+        }
+    };
+    studio.ready.store(true, Ordering::SeqCst);
+    while let Ok((id, work)) = rx.recv() {
+        let Some(job) = studio.jobs.get(&id) else { continue };
+        if job.cancel.load(Ordering::SeqCst) {
+            continue;
+        }
+        studio.jobs.update(&id, |j| {
+            j.state = JobState::Running;
+            j.message = "running".into();
+        });
+        let started = Instant::now();
+        let result = crate::util::interrupt::cancellable(job.cancel.clone(), || run_job(&studio, models.as_ref(), &id, &work, started));
+        let seconds = started.elapsed().as_secs_f64();
+        let (state, message) = match result {
+            Ok(msg) => (JobState::Done, msg),
+            Err(Error::Cancelled) => (JobState::Cancelled, "cancelled: what it had not finished is dropped".to_string()),
+            Err(e) => (JobState::Failed, crate::error::one_line(&e.to_string())),
+        };
+        if state != JobState::Done {
+            // Outputs that did not finish are dropped: the gallery holds whole variants only.
+            for out in job_outputs(&studio, &id) {
+                let unfinished = studio.gallery.with(&out, |s| Ok(s.verdict.is_none() && s.kept_as.is_none())).unwrap_or(false);
+                if unfinished {
+                    let _ = studio.gallery.discard(&out);
+                }
+            }
+        }
+        log::info!("studio: job {id} ({}) {state:?} in {seconds:.2} s: {message}", work.kind());
+        studio.jobs.update(&id, |j| {
+            j.state = state;
+            j.message = message;
+            j.seconds = seconds;
+            if state == JobState::Done {
+                j.progress = 1.0;
+            }
+        });
+        if crate::util::interrupt::requested().is_some() {
+            break;
+        }
+    }
+}
+
+fn job_outputs(studio: &Studio, id: &str) -> Vec<String> {
+    studio.jobs.get(id).map(|j| j.outputs).unwrap_or_default()
+}
+
+fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, started: Instant) -> Result<String> {
+    if let Work::Keep { shape } = work {
+        return keep(studio, id, shape);
+    }
+    let models = models.ok_or_else(|| {
+        let why = studio.load_error.lock().unwrap_or_else(|e| e.into_inner()).clone().unwrap_or_default();
+        Error::Invalid(format!("no networks loaded: {why}"))
+    })?;
+    let finest = studio.exemplar.len() - 1;
+    // (first level index to make, n, seed, extent, level to continue from,
+    //  levels each output starts with, what made it, seed per output)
+    let (start, n, seed, extent, from, given, made_by): (usize, usize, u64, [f32; 3], Option<Level>, Vec<Arc<Level>>, String) = match work {
+        Work::Sample { n, seed, extent } => {
+            let how = if *extent == [1.0; 3] { String::new() } else { format!(", extent {extent:?}") };
+            (0, *n, *seed, *extent, None, Vec::new(), format!("new variant (seed {seed}{how})"))
+        }
+        Work::MoreLike { source, levels, n, seed } => {
+            let last = levels.last().ok_or_else(|| Error::Invalid("nothing to keep".into()))?;
+            let k = last.index;
+            (k + 1, *n, *seed, [1.0; 3], Some((**last).clone()), levels.clone(), format!("more like {source} (its levels up to {k}, seed {seed})"))
+        }
+        Work::Regenerate { draft, source, level, seed } => {
+            let s = seed.unwrap_or(SeedOf { seed: studio.config.train.seed, index: 0 });
+            let made_by = format!("edit of {source} at level {} ({draft})", level.index);
+            return regenerate(studio, models, id, level, s, made_by, started);
+        }
+        Work::Keep { .. } => unreachable!("handled above"),
+    };
+    if start > finest {
+        return Err(Error::Invalid(format!("nothing finer to make: the finest level is {finest}")));
+    }
+    let ids: Vec<String> = (0..n)
+        .map(|i| studio.gallery.add_session(made_by.clone(), Some(SeedOf { seed, index: i }), given.iter().map(|l| (**l).clone()).collect()))
+        .collect();
+    studio.jobs.update(id, |j| j.outputs = ids.clone());
+    let total = (n * (finest + 1 - start)) as f64;
+    for (i, shape) in ids.iter().enumerate() {
+        crate::util::interrupt::check()?;
+        let opts = SampleOptions { first: i, extent, ..SampleOptions::from_config(&studio.config, 1, seed) };
+        let done_before = i * (finest + 1 - start);
+        let sink = |_: usize, level: &Level| studio.level_made(id, shape, level, started, done_before, total);
+        sample_variants_observed(models, &studio.exemplar, &opts, from.clone(), Some(&sink))?;
+        studio.judge_shape(shape);
+    }
+    Ok(format!("{n} variant{} made", if n == 1 { "" } else { "s" }))
+}
+
+fn regenerate(studio: &Studio, models: &Models, id: &str, level: &Level, seed: SeedOf, made_by: String, started: Instant) -> Result<String> {
+    let finest = studio.exemplar.len() - 1;
+    if level.index >= finest {
+        return Err(Error::Invalid(format!("the edit is at the finest level ({}): nothing finer to regenerate", level.index)));
+    }
+    let shape = studio.gallery.add_session(made_by, Some(seed), vec![level.clone()]);
+    studio.jobs.update(id, |j| j.outputs = vec![shape.clone()]);
+    let total = (finest - level.index) as f64;
+    let opts = SampleOptions { first: seed.index, ..SampleOptions::from_config(&studio.config, 1, seed.seed) };
+    let sink = |_: usize, l: &Level| studio.level_made(id, &shape, l, started, 0, total);
+    sample_variants_observed(models, &studio.exemplar, &opts, Some(level.clone()), Some(&sink))?;
+    studio.judge_shape(&shape);
+    Ok(format!("levels {}..{finest} regenerated", level.index + 1))
+}
+
+fn keep(studio: &Studio, id: &str, shape: &str) -> Result<String> {
+    let (levels, seed, made_by) = studio.gallery.with(shape, |s| {
+        let made_by = match &s.origin {
+            super::shapes::Origin::Session { made_by } => made_by.clone(),
+            _ => return Err(Error::Invalid(format!("{shape} is already a variant of the run"))),
+        };
+        if let Some(k) = &s.kept_as {
+            return Err(Error::Invalid(format!("{shape} is already kept as {k}")));
+        }
+        Ok((s.levels.values().map(|l| (**l).clone()).collect::<Vec<Level>>(), s.seed, made_by))
+    })?;
+    let record = serde_json::to_vec_pretty(&StudioRecord { made_by, seed }).map_err(|e| Error::Invalid(e.to_string()))?;
+    let kept = crate::pipeline::keep::KeptVariant {
+        levels: &levels,
+        seed: seed.map(|s| variant_seed(s.seed, s.index)),
+        record: &record,
+        record_name: STUDIO_RECORD,
+    };
+    let mut progress = |what: &str| studio.jobs.update(id, |j| j.message = what.to_string());
+    let (name, dir) = crate::pipeline::keep::keep_variant(&studio.paths, &studio.config, &kept, &mut progress)?;
+    let eval = studio.read_eval();
+    studio.gallery.add_run_variant(name.clone(), dir.clone(), eval.as_ref());
+    if let Some(e) = &eval {
+        studio.gallery.refresh_verdicts(e);
+    }
+    studio.gallery.with(shape, |s| {
+        s.kept_as = Some(name.clone());
+        Ok(())
+    })?;
+    studio.jobs.update(id, |j| j.outputs = vec![shape.to_string(), name.clone()]);
+    Ok(format!("kept as {}", dir.display()))
+}
+
+impl Studio {
+    /// A level of `shape` is made: it joins the shape, and the job's status
+    /// says when.
+    fn level_made(&self, job: &str, shape: &str, level: &Level, started: Instant, done_before: usize, total: f64) {
+        let l = Arc::new(level.clone());
+        let _ = self.gallery.with(shape, |s| {
+            s.levels.insert(level.index, l);
+            if !s.present.contains(&level.index) {
+                s.present.push(level.index);
+                s.present.sort_unstable();
+            }
+            s.preview = None;
+            Ok(())
+        });
+        let seconds = started.elapsed().as_secs_f64();
+        self.jobs.update(job, |j| {
+            let made = j.levels.iter().filter(|r| r.shape == shape).count() + 1;
+            j.progress = ((done_before + made) as f64 / total.max(1.0)).min(1.0);
+            j.message = format!("{shape}: level {} ({}^3) made", level.index, level.resolution);
+            j.levels.push(LevelReady {
+                shape: shape.to_string(),
+                level: level.index,
+                resolution: level.resolution,
+                voxels: level.len(),
+                seconds,
+                since_asked: j.asked.elapsed().as_secs_f64(),
+            });
+        });
+    }
+
+    /// The structure judge's verdict on a finished session variant.
+    fn judge_shape(&self, shape: &str) {
+        let levels: Vec<Arc<Level>> = self.gallery.with(shape, |s| Ok(s.levels.values().cloned().collect())).unwrap_or_default();
+        let verdict = judge(&self.exemplar, &levels).unwrap_or_default();
+        let _ = self.gallery.with(shape, |s| {
+            s.verdict = Some(verdict);
+            Ok(())
+        });
+    }
+}

@@ -1,0 +1,344 @@
+//! The studio (`shapeshifter studio RUN`): a local web page to steer the
+//! variants of a run with trained networks. It keeps the exemplar, the
+//! networks and the variants in memory; a person looks at any level of any
+//! variant beside the exemplar, samples new ones, asks for more like one,
+//! resizes the level-0 box, edits a coarse level (delete, copy, paste, move,
+//! paste from the exemplar, undo, redo) and has the finer levels
+//! regenerated, then keeps what is worth keeping as a variant folder of the
+//! run (level files, previews, mesh, the USD asset, the evaluation).
+//!
+//! The studio calls the library functions the commands call: sampling is
+//! [`crate::pipeline::sample::sample_variants_observed`] (`sample`'s, told of
+//! each level as it is made), editing is [`crate::level::edit`] (`edit`'s),
+//! keeping is [`crate::pipeline::keep`] then the run's own mesh, USD and eval
+//! stages.
+//!
+//! - [`shapes`]: the gallery (exemplar, run variants, session variants) and
+//!   the judge's verdicts;
+//! - [`drafts`]: edits of a level with undo and redo;
+//! - [`jobs`]: the one worker that owns the networks, and the job queue;
+//! - [`http`]: the local HTTP server (token, Host check, routes);
+//! - [`assets`]: the page and the vendored three.js, built into the binary.
+
+pub mod assets;
+pub mod drafts;
+pub mod http;
+pub mod jobs;
+pub mod shapes;
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::io::dataset;
+use crate::level::Level;
+use crate::pipeline::layout::{RunPaths, CONFIG};
+
+pub use drafts::{Clipboard, Draft, DraftSummary, EditRequest};
+pub use jobs::{JobState, JobStatus, Jobs, Work};
+pub use shapes::{Gallery, ShapeSummary, Verdict, STUDIO_RECORD};
+
+/// Most variants one job may ask for (each is a full coarse-to-fine pass).
+pub const MAX_VARIANTS_PER_JOB: usize = 16;
+
+/// A run folder opened for steering.
+pub struct Studio {
+    pub paths: RunPaths,
+    /// The configuration the networks were trained under (`models/config.toml`).
+    pub config: Config,
+    pub exemplar: Vec<Level>,
+    pub exemplar_name: String,
+    pub device: tch::Device,
+    pub gallery: Gallery,
+    drafts: Mutex<Vec<Draft>>,
+    next_draft: Mutex<usize>,
+    clipboard: Mutex<Option<Clipboard>>,
+    pub jobs: Jobs,
+    /// Set once the worker has loaded the networks (or failed to).
+    pub ready: AtomicBool,
+    pub load_error: Mutex<Option<String>>,
+}
+
+/// A job as the page asks for it.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum JobRequest {
+    /// `n` new variants from a fresh seed (`seed`, else one drawn), the
+    /// level-0 box scaled by `extent` per axis.
+    Sample { n: usize, seed: Option<u64>, extent: Option<[f32; 3]> },
+    /// `n` variants keeping `source`'s levels up to `keep_level`.
+    MoreLike { source: String, keep_level: usize, n: usize, seed: Option<u64> },
+    /// The finer levels of a draft.
+    Regenerate { draft: String },
+    /// A session variant written into the run.
+    Keep { shape: String },
+}
+
+/// Everything the page lists.
+#[derive(Serialize)]
+pub struct StudioState {
+    pub run: String,
+    pub exemplar: String,
+    /// Resolution of each level, coarsest first.
+    pub resolutions: Vec<u32>,
+    /// Levels made by networks (the finer ones by detail transfer).
+    pub network_levels: usize,
+    /// The structure level's index (where the judge looks).
+    pub structure_level: Option<usize>,
+    pub level0_box_budget: f64,
+    /// The exemplar's frame: normalised = (world - centre) * scale (a
+    /// mesh, in world units, is placed with it); `up` the vertical axis.
+    pub frame_centre: [f64; 3],
+    pub frame_scale: f64,
+    pub up: &'static str,
+    pub ready: bool,
+    pub load_error: Option<String>,
+    pub shapes: Vec<ShapeSummary>,
+    pub drafts: Vec<DraftSummary>,
+    pub clipboard: Option<String>,
+    pub jobs: Vec<JobStatus>,
+}
+
+impl Studio {
+    /// Opens the run folder `dir` (its encoded exemplar, the configuration
+    /// its networks were trained under, its variants). The networks are
+    /// loaded by the worker ([`Studio::start`]).
+    pub fn open(dir: &Path, device: tch::Device) -> Result<(Arc<Studio>, std::sync::mpsc::Receiver<(String, Work)>)> {
+        let paths = RunPaths::new(dir);
+        let recorded = paths.models().join(CONFIG);
+        if !recorded.is_file() {
+            return Err(Error::Usage(format!(
+                "{}: no trained models here (no models/config.toml): the studio opens a run folder after `shapeshifter run` (or `train`)",
+                dir.display()
+            )));
+        }
+        let config = Config::read(&recorded)?;
+        let (manifest, exemplar) = dataset::read(&paths.exemplar())?;
+        let eval = read_json(&paths.eval_json());
+        let gallery = Gallery::open(&exemplar, &paths.variants(), eval.as_ref())?;
+        let (jobs, rx) = Jobs::new();
+        let studio = Studio {
+            paths,
+            config,
+            exemplar,
+            exemplar_name: manifest.exemplar,
+            device,
+            gallery,
+            drafts: Mutex::new(Vec::new()),
+            next_draft: Mutex::new(1),
+            clipboard: Mutex::new(None),
+            jobs,
+            ready: AtomicBool::new(false),
+            load_error: Mutex::new(None),
+        };
+        Ok((Arc::new(studio), rx))
+    }
+
+    /// Starts the worker that loads the networks and runs the jobs.
+    pub fn start(self: &Arc<Self>, rx: std::sync::mpsc::Receiver<(String, Work)>) -> std::thread::JoinHandle<()> {
+        let studio = self.clone();
+        std::thread::Builder::new()
+            .name("studio-worker".into())
+            .spawn(move || jobs::worker(studio, rx))
+            .expect("a thread starts")
+    }
+
+    pub fn read_eval(&self) -> Option<serde_json::Value> {
+        read_json(&self.paths.eval_json())
+    }
+
+    pub fn state(&self) -> StudioState {
+        StudioState {
+            run: self.paths.root.display().to_string(),
+            exemplar: self.exemplar_name.clone(),
+            resolutions: self.exemplar.iter().map(|l| l.resolution).collect(),
+            network_levels: crate::pipeline::sample::trained_levels(&self.config, &self.exemplar),
+            structure_level: crate::level::structure::structure_level(&self.exemplar).map(|l| l.index),
+            level0_box_budget: crate::learn::sample::MAX_LEVEL0_BOX_CUBES,
+            frame_centre: self.exemplar[0].frame.centre.to_array(),
+            frame_scale: self.exemplar[0].frame.scale,
+            up: if self.exemplar[0].frame.up == crate::level::Up::Z { "z" } else { "y" },
+            ready: self.ready.load(std::sync::atomic::Ordering::SeqCst),
+            load_error: self.load_error.lock().unwrap_or_else(|e| e.into_inner()).clone(),
+            shapes: self.gallery.summaries(),
+            drafts: self.lock_drafts().iter().map(Draft::summary).collect(),
+            clipboard: self.clipboard.lock().unwrap_or_else(|e| e.into_inner()).as_ref().map(|c| format!("{} voxels of {}", c.piece.len(), c.from)),
+            jobs: self.jobs.list(),
+        }
+    }
+
+    fn lock_drafts(&self) -> std::sync::MutexGuard<'_, Vec<Draft>> {
+        self.drafts.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// A new draft of level `level` of shape `source`.
+    pub fn new_draft(&self, source: &str, level: usize) -> Result<DraftSummary> {
+        let finest = self.exemplar.len() - 1;
+        if level >= finest {
+            return Err(Error::Invalid(format!("level {level}: edit a coarser level than the finest ({finest}), so there is something to regenerate")));
+        }
+        let l = self.gallery.level(source, level)?;
+        let seed = self.gallery.with(source, |s| Ok(s.seed))?;
+        let id = {
+            let mut n = self.next_draft.lock().unwrap_or_else(|e| e.into_inner());
+            let id = format!("d{n}");
+            *n += 1;
+            id
+        };
+        let draft = Draft::new(id, source.to_string(), seed, (*l).clone());
+        let summary = draft.summary();
+        self.lock_drafts().push(draft);
+        Ok(summary)
+    }
+
+    /// Applies an edit to a draft; what it did and the draft after it.
+    pub fn edit(&self, draft: &str, edit: &EditRequest) -> Result<(String, DraftSummary)> {
+        let mut drafts = self.lock_drafts();
+        let d = drafts.iter_mut().find(|d| d.id == draft).ok_or_else(|| shapes::unknown(draft))?;
+        let exemplar_level = self.exemplar.get(d.level().index);
+        let mut clipboard = self.clipboard.lock().unwrap_or_else(|e| e.into_inner());
+        let what = d.apply(edit, &mut clipboard, exemplar_level)?;
+        Ok((what, d.summary()))
+    }
+
+    /// The current level of a draft.
+    pub fn draft_level(&self, draft: &str) -> Result<Level> {
+        let drafts = self.lock_drafts();
+        let d = drafts.iter().find(|d| d.id == draft).ok_or_else(|| shapes::unknown(draft))?;
+        Ok(d.level().clone())
+    }
+
+    pub fn discard_draft(&self, draft: &str) -> Result<()> {
+        let mut drafts = self.lock_drafts();
+        let at = drafts.iter().position(|d| d.id == draft).ok_or_else(|| shapes::unknown(draft))?;
+        drafts.remove(at);
+        Ok(())
+    }
+
+    /// Checks a job request and queues it; its id. Everything a job needs is
+    /// checked here, so a bad request is refused at once and queues nothing.
+    pub fn submit(&self, request: JobRequest) -> Result<String> {
+        let fresh_seed = |seed: Option<u64>| seed.unwrap_or_else(random_seed);
+        let check_n = |n: usize| {
+            if n == 0 || n > MAX_VARIANTS_PER_JOB {
+                return Err(Error::Invalid(format!("n = {n}: ask for 1 to {MAX_VARIANTS_PER_JOB} variants")));
+            }
+            Ok(n)
+        };
+        let work = match request {
+            JobRequest::Sample { n, seed, extent } => {
+                let extent = extent.unwrap_or([1.0; 3]);
+                crate::learn::sample::level0_box(&self.exemplar[0], extent)?;
+                Work::Sample { n: check_n(n)?, seed: fresh_seed(seed), extent }
+            }
+            JobRequest::MoreLike { source, keep_level, n, seed } => {
+                let finest = self.exemplar.len() - 1;
+                if keep_level >= finest {
+                    return Err(Error::Invalid(format!("keep_level {keep_level}: keep levels up to at most {} (the finest is {finest})", finest - 1)));
+                }
+                let levels = (0..=keep_level).map(|k| self.gallery.level(&source, k)).collect::<Result<Vec<_>>>()?;
+                Work::MoreLike { source, levels, n: check_n(n)?, seed: fresh_seed(seed) }
+            }
+            JobRequest::Regenerate { draft } => {
+                let drafts = self.lock_drafts();
+                let d = drafts.iter().find(|d| d.id == draft).ok_or_else(|| shapes::unknown(&draft))?;
+                if d.level().is_empty() {
+                    return Err(Error::Invalid(format!("{draft} has no voxels left: nothing to regenerate from")));
+                }
+                Work::Regenerate { draft: draft.clone(), source: d.source.clone(), level: d.level().clone(), seed: d.seed }
+            }
+            JobRequest::Keep { shape } => {
+                self.gallery.with(&shape, |s| match (&s.origin, &s.kept_as, &s.verdict) {
+                    (shapes::Origin::Session { .. }, None, Some(_)) => Ok(()),
+                    (shapes::Origin::Session { .. }, Some(k), _) => Err(Error::Invalid(format!("{shape} is already kept as {k}"))),
+                    (shapes::Origin::Session { .. }, None, None) => Err(Error::Invalid(format!("{shape} is not finished yet"))),
+                    _ => Err(Error::Invalid(format!("{shape} is already a variant of the run"))),
+                })?;
+                Work::Keep { shape }
+            }
+        };
+        self.jobs.submit(work)
+    }
+
+    /// A PNG of the finest level of shape `id` (its preview file where the
+    /// folder has one), drawn once.
+    pub fn preview(&self, id: &str) -> Result<Arc<Vec<u8>>> {
+        let (cached, folder, finest) = self.gallery.with(id, |s| Ok((s.preview.clone(), s.folder().map(Path::to_path_buf), s.present.last().copied())))?;
+        if let Some(png) = cached {
+            return Ok(png);
+        }
+        let finest = finest.ok_or_else(|| Error::Invalid(format!("{id} has no level yet")))?;
+        let file = folder.map(|f| f.join(crate::level::files::preview_file_name(finest))).filter(|p| p.is_file());
+        let png = match file {
+            Some(p) => std::fs::read(&p).map_err(|e| Error::file(&p, e.to_string()))?,
+            None => {
+                let level = self.gallery.level(id, finest)?;
+                let img = crate::render::render_level(&level, &crate::render::preview_options())?;
+                let mut bytes = std::io::Cursor::new(Vec::new());
+                img.write_to(&mut bytes, image::ImageFormat::Png).map_err(|e| Error::Invalid(format!("preview: {e}")))?;
+                bytes.into_inner()
+            }
+        };
+        let png = Arc::new(png);
+        self.gallery.with(id, |s| {
+            s.preview = Some(png.clone());
+            Ok(())
+        })?;
+        Ok(png)
+    }
+}
+
+fn read_json(path: &Path) -> Option<serde_json::Value> {
+    serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+}
+
+/// A seed from the operating system's random source (a new variant's).
+pub fn random_seed() -> u64 {
+    let mut b = [0u8; 8];
+    if let Ok(mut f) = std::fs::File::open("/dev/urandom") {
+        use std::io::Read;
+        if f.read_exact(&mut b).is_ok() {
+            return u64::from_le_bytes(b) % 1_000_000_007;
+        }
+    }
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64) % 1_000_000_007
+}
+
+/// What `shapeshifter studio` is asked.
+pub struct StudioRequest<'a> {
+    pub dir: &'a Path,
+    /// 0: a free port the system picks.
+    pub port: u16,
+    pub device_spec: &'a str,
+    /// Wait for another command writing the run folder instead of failing.
+    pub wait: bool,
+}
+
+/// The `studio` command: holds the run folder's lock (a `run` on it is
+/// refused while the studio can write), loads it, serves the page on
+/// 127.0.0.1 and tells `announce` its address (with the token), then serves
+/// until SIGINT or SIGTERM. On a stop, new jobs are refused, the running one
+/// is cancelled between steps, and what it had not finished is dropped (a
+/// kept variant's folder is renamed into place only once whole).
+pub fn run_studio(r: &StudioRequest, announce: &mut dyn FnMut(&str)) -> Result<()> {
+    if !r.dir.is_dir() {
+        return Err(Error::Usage(format!("{}: no such run folder", r.dir.display())));
+    }
+    let device = crate::pipeline::run::device(r.device_spec)?;
+    let _lock = crate::util::lock::lock(r.dir, crate::util::lock::Mode::Exclusive, r.wait, "studio")?;
+    let (studio, rx) = Studio::open(r.dir, device)?;
+    let worker = studio.start(rx);
+    let served = http::serve(studio.clone(), http::ServeOptions { port: r.port, token: None })?;
+    announce(&served.url());
+    while crate::util::interrupt::requested().is_none() && !worker.is_finished() {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    studio.jobs.close();
+    served.stop();
+    let _ = worker.join();
+    crate::util::interrupt::check()
+}
