@@ -18,3 +18,4 @@ mod ladder;
 mod mesh_out;
 mod pipeline;
 mod robustness;
+mod studio;

@@ -34,6 +34,9 @@ pub const MODELS_DIR: &str = "models";
 /// One folder per variant, `variant_NNN`.
 pub const VARIANTS_DIR: &str = "variants";
 pub const VARIANT_PREFIX: &str = "variant_";
+/// Beside the levels of a variant kept from the studio: what made it. A
+/// later sampling leaves such a folder as it is.
+pub const KEPT_RECORD: &str = "studio.json";
 /// The scores of the variants.
 pub const EVAL_JSON: &str = "eval.json";
 /// The exemplar and the variants, one camera.

@@ -154,8 +154,17 @@ pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
                 })
             })
     };
-    let todo: Vec<usize> =
-        indices.iter().zip(&dirs).filter(|(&i, d)| !(is_done(d, StampOf::Sample, &key(i)) && previewed(d))).map(|(&i, _)| i).collect();
+    // A variant kept from the studio is the user's: never sampled over.
+    let kept = |d: &Path| d.join(super::layout::KEPT_RECORD).is_file();
+    for d in dirs.iter().filter(|d| kept(d)) {
+        log::info!("sample: {} was kept from the studio: left as it is", d.display());
+    }
+    let todo: Vec<usize> = indices
+        .iter()
+        .zip(&dirs)
+        .filter(|(&i, d)| !kept(d) && !(is_done(d, StampOf::Sample, &key(i)) && previewed(d)))
+        .map(|(&i, _)| i)
+        .collect();
     let reused = dirs.iter().zip(&indices).filter(|(d, i)| !todo.contains(i) && stamped_before_this_command(d, StampOf::Sample)).count();
     if reused > 0 {
         log::info!("sample: reusing {reused} variants in {}", job.variants_dir.display());

@@ -120,7 +120,7 @@ impl Shape {
 /// The record a variant kept from the studio carries beside its levels: what
 /// made it, so a later `run` leaves it as it is and the studio can continue
 /// it with its own seed.
-pub const STUDIO_RECORD: &str = "studio.json";
+pub const STUDIO_RECORD: &str = crate::pipeline::layout::KEPT_RECORD;
 
 /// What [`STUDIO_RECORD`] holds.
 #[derive(Clone, Debug, Serialize, serde::Deserialize)]

@@ -114,9 +114,14 @@ function pointsObject(p) {
   return o;
 }
 
+// The exemplar's levels never change: fetched once each.
+const exemplarPoints = {};
 async function loadPoints(id, k) {
+  if (id === 'exemplar' && exemplarPoints[k]) return exemplarPoints[k];
   const buf = await (await call('GET', `/api/shapes/${id}/levels/${k}/points`)).arrayBuffer();
-  return parsePoints(buf);
+  const p = parsePoints(buf);
+  if (id === 'exemplar') exemplarPoints[k] = p;
+  return p;
 }
 
 function setObject(scene, old, obj) {
@@ -168,7 +173,7 @@ function voxelBounds(b, res) {
 function drawBox() {
   if (boxHelper) { left.remove(boxHelper); boxHelper = null; }
   const p = leftPoints && leftPoints.userData.payload;
-  if (S.box && S.draft && p) {
+  if (S.box && S.draft && S.selected === S.draft.id && p) {
     boxHelper = new THREE.Box3Helper(voxelBounds(S.box, p.resolution), 0xe89a3c);
     left.add(boxHelper);
   }
@@ -178,11 +183,10 @@ function drawBox() {
 // Shows level k of shape id on the left and the exemplar's level k on the right.
 async function show(id, k, why) {
   S.selected = id; S.level = k;
-  const shownId = S.draft && id === S.draft.id ? id : id;
-  const [p, e] = await Promise.all([loadPoints(shownId, k), loadPoints('exemplar', Math.min(k, S.state.resolutions.length - 1))]);
+  const [p, e] = await Promise.all([loadPoints(id, k), loadPoints('exemplar', Math.min(k, S.state.resolutions.length - 1))]);
   if (S.selected !== id || S.level !== k) return; // a later click won
   leftPoints = setObject(left, leftPoints, pointsObject(p));
-  rightPoints = setObject(right, rightPoints, pointsObject(e));
+  if (!rightPoints || rightPoints.userData.payload !== e) rightPoints = setObject(right, rightPoints, pointsObject(e));
   await updateMesh();
   $('left-label').textContent = `${id} level ${k} (${p.resolution}^3, ${p.n} points)`;
   drawBox();

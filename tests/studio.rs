@@ -1,0 +1,384 @@
+//! The studio's API against the real binary on a tiny trained run: the
+//! token and the Host check, bad requests answered 4xx with one line and
+//! nothing changed, 50 requests at once, an edit regenerated and kept (a
+//! variant folder that reads back and differs where it was edited), a job
+//! cancelled, the run folder's lock, and SIGTERM. The page itself is driven
+//! by a real browser in `make studio-test`.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use serde_json::{json, Value};
+
+use crate::common::{shapeshifter, stderr};
+
+/// A run of the demo exemplar through 64^3 (levels 16, 32, 64, every one by
+/// a small network), two variants: made once per test binary, copied by
+/// each test (a studio writes into its run).
+fn tiny_run() -> &'static Path {
+    static RUN: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    &RUN.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("run");
+        let mut args = vec!["-q", "demo", "-o", out.to_str().unwrap(), "-n", "2", "--jobs", "2"];
+        for s in [
+            "encode.sampling_resolution=128",
+            "encode.finest_resolution=64",
+            "model.channels=8",
+            "model.upsampler_channels=8",
+            "train.level0_iterations=150",
+            "train.upper_iterations=60",
+            "train.upsampler_iterations=60",
+            "sample.level0_candidates=1",
+            "sample.attempts=1",
+            "sample.level0_steps=20",
+            "sample.upper_steps=4",
+        ] {
+            args.extend(["--set", s]);
+        }
+        let o = shapeshifter(&args);
+        assert!(o.status.success(), "tiny run: {}", stderr(&o));
+        (dir, out)
+    })
+    .1
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            copy_dir(&p, &to.join(e.file_name()));
+        } else {
+            std::fs::copy(&p, to.join(e.file_name())).unwrap();
+        }
+    }
+}
+
+/// A studio on a copy of the tiny run: the process, its base address and token.
+struct Studio {
+    child: Child,
+    base: String,
+    token: String,
+    run: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl Studio {
+    fn start() -> Studio {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path().join("run");
+        copy_dir(tiny_run(), &run);
+        let mut child = Command::new(env!("CARGO_BIN_EXE_shapeshifter"))
+            .args(["studio", run.to_str().unwrap(), "--port", "0"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let url = line.trim().strip_prefix("studio: ").unwrap_or_else(|| panic!("no address printed: {line}")).to_string();
+        let (base, token) = url.split_once("/?token=").unwrap();
+        let s = Studio { child, base: base.to_string(), token: token.to_string(), run, _dir: dir };
+        // The networks load on the worker; the page says when.
+        let t = Instant::now();
+        while !s.get("/api/state").1["ready"].as_bool().unwrap_or(false) {
+            assert!(t.elapsed() < Duration::from_secs(60), "the networks never loaded");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        s
+    }
+
+    fn request(&self, method: &str, path: &str, body: Option<&str>, headers: &[(&str, &str)]) -> (u16, Vec<u8>) {
+        let agent = ureq::AgentBuilder::new().timeout(Duration::from_secs(60)).build();
+        let mut r = agent.request(method, &format!("{}{path}", self.base));
+        for (k, v) in headers {
+            r = r.set(k, v);
+        }
+        let result = match body {
+            Some(b) => r.set("Content-Type", "application/json").send_string(b),
+            None => r.call(),
+        };
+        let resp = match result {
+            Ok(resp) => resp,
+            Err(ureq::Error::Status(_, resp)) => resp,
+            Err(e) => panic!("{method} {path}: {e}"),
+        };
+        let status = resp.status();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut resp.into_reader(), &mut bytes).unwrap();
+        (status, bytes)
+    }
+
+    fn call(&self, method: &str, path: &str, body: Option<&str>) -> (u16, Value) {
+        let (status, bytes) = self.request(method, path, body, &[("X-Studio-Token", &self.token)]);
+        (status, serde_json::from_slice(&bytes).unwrap_or(Value::Null))
+    }
+    fn get(&self, path: &str) -> (u16, Value) {
+        self.call("GET", path, None)
+    }
+    fn post(&self, path: &str, body: Value) -> (u16, Value) {
+        self.call("POST", path, Some(&body.to_string()))
+    }
+
+    /// Waits for job `id` to finish; its status.
+    fn finish(&self, id: &str) -> Value {
+        let t = Instant::now();
+        loop {
+            let (_, j) = self.get(&format!("/api/jobs/{id}"));
+            if ["done", "failed", "cancelled"].contains(&j["state"].as_str().unwrap_or("")) {
+                return j;
+            }
+            assert!(t.elapsed() < Duration::from_secs(300), "job {id} never finished: {j}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Sends `sig`; the exit status, within `within`.
+    fn signal(mut self, sig: i32, within: Duration) -> (Option<i32>, Duration, PathBuf, tempfile::TempDir) {
+        // SAFETY: kill(2) on the child this test started and has not reaped.
+        unsafe { libc::kill(self.child.id() as i32, sig) };
+        let t = Instant::now();
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                return (status.code(), t.elapsed(), self.run.clone(), std::mem::replace(&mut self._dir, tempfile::tempdir().unwrap()));
+            }
+            if t.elapsed() > within {
+                let _ = self.child.kill();
+                panic!("the studio did not end within {within:?} of signal {sig}");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Studio {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn error_line(v: &Value) -> String {
+    let e = v["error"].as_str().unwrap_or_else(|| panic!("no error message: {v}")).to_string();
+    assert!(!e.contains('\n') && !e.is_empty(), "{e}");
+    e
+}
+
+/// Voxels of a level file.
+fn voxels(path: &Path) -> usize {
+    shapeshifter::io::vdb::read_level(path).unwrap().0.len()
+}
+
+#[test]
+fn the_studio_answers_only_its_token_and_loopback_and_refuses_bad_requests_with_one_line() {
+    let s = Studio::start();
+    let state_path = "/api/state";
+    // No token, a wrong one: 403. The token as the page gets it (a query,
+    // then a cookie) and as a header: 200.
+    assert_eq!(s.request("GET", state_path, None, &[]).0, 403);
+    assert_eq!(s.request("GET", state_path, None, &[("X-Studio-Token", "0123")]).0, 403);
+    assert_eq!(s.request("GET", &format!("{state_path}?token={}", s.token), None, &[]).0, 200);
+    let (status, page) = s.request("GET", &format!("/?token={}", s.token), None, &[]);
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&page).contains("/assets/studio.js"));
+    let port = s.base.rsplit(':').next().unwrap();
+    let cookie = format!("shapeshifter_studio_{port}={}", s.token);
+    assert_eq!(s.request("GET", "/assets/three.module.js", None, &[("Cookie", &cookie)]).0, 200);
+    // DNS rebinding: another name for 127.0.0.1 is refused, token or not.
+    let (status, body) = s.request("GET", state_path, None, &[("X-Studio-Token", &s.token), ("Host", "attacker.example")]);
+    assert_eq!(status, 403, "{}", String::from_utf8_lossy(&body));
+    // Nothing served by path: traversal finds no route.
+    for p in ["/assets/../config.toml", "/api/shapes/..%2fconfig.toml/preview.png", "/config.toml"] {
+        let (status, v) = s.get(p);
+        assert!(status == 404, "{p}: {status} {v}");
+    }
+
+    let (_, state) = s.get(state_path);
+    let ids: Vec<&str> = state["shapes"].as_array().unwrap().iter().map(|v| v["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["exemplar", "variant_000", "variant_001"]);
+    assert_eq!(state["resolutions"], json!([16, 32, 64]));
+
+    // Bad requests: a 4xx with one line, nothing changed.
+    let (status, v) = s.call("POST", "/api/drafts", Some("{not json"));
+    assert_eq!(status, 400);
+    assert!(error_line(&v).contains("malformed request"));
+    let (status, v) = s.post("/api/drafts", json!({"source": "variant_042", "level": 1}));
+    assert_eq!(status, 404);
+    assert!(error_line(&v).contains("variant_042"));
+    let (status, v) = s.post("/api/jobs", json!({"kind": "sample", "n": 1, "extent": [100, 100, 100]}));
+    assert_eq!(status, 400);
+    assert!(error_line(&v).contains("level-0 box"), "{v}");
+    let (status, v) = s.post("/api/jobs", json!({"kind": "sample", "n": 0}));
+    assert_eq!(status, 400, "{v}");
+    let (status, v) = s.post("/api/jobs", json!({"kind": "launch_missiles"}));
+    assert_eq!(status, 400, "{v}");
+    let (status, v) = s.post("/api/jobs", json!({"kind": "keep", "shape": "variant_000"}));
+    assert_eq!(status, 400, "{v}");
+    assert!(error_line(&v).contains("already a variant of the run"));
+    let (_, draft) = s.post("/api/drafts", json!({"source": "variant_000", "level": 1}));
+    let voxels_before = draft["voxels"].as_u64().unwrap();
+    for bad in [
+        json!({"op": "delete", "box": {"min": [0, 0, 0], "max": [40, 3, 3]}}),
+        json!({"op": "delete", "box": {"min": [0, 0, 0], "max": [0, 0, 0]}}),
+        json!({"op": "paste", "to": [1, 1, 1]}),
+        json!({"op": "move", "box": {"min": [0, 0, 0], "max": [31, 31, 31]}, "by": [20, 0, 0]}),
+        json!({"op": "explode"}),
+    ] {
+        let (status, v) = s.post("/api/drafts/d1/edit", bad.clone());
+        assert_eq!(status, 400, "{bad}: {v}");
+        error_line(&v);
+    }
+    let (_, state) = s.get(state_path);
+    assert_eq!(state["drafts"][0]["voxels"].as_u64(), Some(voxels_before), "refused edits changed the draft");
+    assert_eq!(state["drafts"][0]["edits"], json!([]));
+    assert_eq!(state["jobs"], json!([]), "a refused job was queued");
+    let (status, _) = s.get("/api/shapes/variant_000/levels/7/points");
+    assert_eq!(status, 400);
+    assert_eq!(s.request("DELETE", state_path, None, &[("X-Studio-Token", &s.token)]).0, 405);
+
+    // 50 requests at once are all answered.
+    let t = Instant::now();
+    let answered: Vec<u16> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..50)
+            .map(|i| {
+                let s = &s;
+                scope.spawn(move || {
+                    let path = if i % 2 == 0 { "/api/state".to_string() } else { format!("/api/shapes/variant_00{}/levels/2/points", i % 2) };
+                    s.request("GET", &path, None, &[("X-Studio-Token", &s.token)]).0
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert!(answered.iter().all(|&c| c == 200), "{answered:?}");
+    eprintln!("50 concurrent requests answered in {:.2} s", t.elapsed().as_secs_f64());
+
+    // The run folder is held: a run on it is refused while the studio serves.
+    let o = shapeshifter(&["demo", "-o", s.run.to_str().unwrap(), "-n", "2"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("studio"), "the refusal names the holder: {}", stderr(&o));
+}
+
+#[test]
+fn an_edit_regenerated_and_kept_is_a_variant_folder_that_differs_where_it_was_edited() {
+    let s = Studio::start();
+    let (status, draft) = s.post("/api/drafts", json!({"source": "variant_001", "level": 1}));
+    assert_eq!(status, 200, "{draft}");
+    // Delete the upper half of level 1 (32^3), undo, redo.
+    let (status, v) = s.post("/api/drafts/d1/edit", json!({"op": "delete", "box": {"min": [0, 16, 0], "max": [31, 31, 31]}}));
+    assert_eq!(status, 200, "{v}");
+    let deleted = draft["voxels"].as_u64().unwrap() - v["draft"]["voxels"].as_u64().unwrap();
+    assert!(deleted > 0);
+    assert_eq!(s.post("/api/drafts/d1/edit", json!({"op": "undo"})).1["draft"]["voxels"], draft["voxels"]);
+    assert_eq!(s.post("/api/drafts/d1/edit", json!({"op": "redo"})).1["draft"]["voxels"], v["draft"]["voxels"]);
+    // Copy a box of the exemplar's level 1 and paste it beside: more voxels.
+    let (status, c) = s.post("/api/drafts/d1/edit", json!({"op": "copy_exemplar", "box": {"min": [0, 0, 0], "max": [31, 6, 31]}}));
+    assert_eq!(status, 200, "{c}");
+    let (status, p) = s.post("/api/drafts/d1/edit", json!({"op": "paste", "to": [0, 0, 0]}));
+    assert_eq!(status, 200, "{p}");
+    assert!(p["did"].as_str().unwrap().contains("of the exemplar level 1"), "{p}");
+
+    let (status, job) = s.post("/api/jobs", json!({"kind": "regenerate", "draft": "d1"}));
+    assert_eq!(status, 202, "{job}");
+    let job = s.finish(job["id"].as_str().unwrap());
+    assert_eq!(job["state"], "done", "{job}");
+    let shape = job["outputs"][0].as_str().unwrap().to_string();
+    let made: Vec<u64> = job["levels"].as_array().unwrap().iter().map(|l| l["level"].as_u64().unwrap()).collect();
+    assert_eq!(made, [2], "each level told as it was made: {job}");
+    let (_, state) = s.get("/api/state");
+    let new = state["shapes"].as_array().unwrap().iter().find(|v| v["id"] == shape.as_str()).unwrap().clone();
+    assert_eq!(new["levels"], json!([1, 2]));
+    assert!(new["verdict"]["by"].as_str().is_some(), "{new}");
+    // Its points and preview are served.
+    let (status, points) = s.request("GET", &format!("/api/shapes/{shape}/levels/2/points"), None, &[("X-Studio-Token", &s.token)]);
+    assert_eq!(status, 200);
+    assert_eq!(&points[..4], b"SSP1");
+    let (status, png) = s.request("GET", &format!("/api/shapes/{shape}/preview.png"), None, &[("X-Studio-Token", &s.token)]);
+    assert_eq!(status, 200);
+    assert!(image::load_from_memory(&png).is_ok());
+
+    // Keep: the next variant folder of the run, with its levels, previews,
+    // mesh and record; in the USD asset and eval.json.
+    let (status, job) = s.post("/api/jobs", json!({"kind": "keep", "shape": shape}));
+    assert_eq!(status, 202, "{job}");
+    let job = s.finish(job["id"].as_str().unwrap());
+    assert_eq!(job["state"], "done", "{job}");
+    let folder = s.run.join("variants/variant_002");
+    for f in ["level_1.vdb", "level_2.vdb", "level_2.points.vdb", "level_2.png", "mesh.ply", "studio.json", "stage_sample.json"] {
+        assert!(folder.join(f).is_file(), "{} lacks {f}", folder.display());
+    }
+    assert!(!s.run.join("variants/.variant_002.partial").exists());
+    let usd = std::fs::read_to_string(s.run.join("variants.usda")).unwrap();
+    assert!(usd.contains("variant_002"), "the USD asset does not name the kept variant");
+    let eval: Value = serde_json::from_slice(&std::fs::read(s.run.join("eval.json")).unwrap()).unwrap();
+    assert!(eval["variants"].as_array().unwrap().iter().any(|v| v["name"] == "variant_002"));
+    let record: Value = serde_json::from_slice(&std::fs::read(folder.join("studio.json")).unwrap()).unwrap();
+    assert!(record["made_by"].as_str().unwrap().contains("edit of variant_001 at level 1"), "{record}");
+    // It reads back and differs from its source where it was edited: no
+    // voxel of its level 1 is in the deleted upper half but the pasted
+    // exemplar's (which lie in y < 7).
+    let (kept1, _) = shapeshifter::io::vdb::read_level(&folder.join("level_1.vdb")).unwrap();
+    let (source1, _) = shapeshifter::io::vdb::read_level(&s.run.join("variants/variant_001/level_1.vdb")).unwrap();
+    assert!(kept1.coords.iter().all(|c| c.y < 16), "voxels left in the deleted box");
+    assert!(source1.coords.iter().any(|c| c.y >= 16), "the source had voxels there");
+    assert_ne!(voxels(&folder.join("level_2.vdb")), 0);
+    // The gallery lists it as a run variant now; keeping it again is refused.
+    let (_, state) = s.get("/api/state");
+    assert!(state["shapes"].as_array().unwrap().iter().any(|v| v["id"] == "variant_002" && v["verdict"]["by"] == "eval.json"));
+    let (status, v) = s.post("/api/jobs", json!({"kind": "keep", "shape": shape}));
+    assert_eq!(status, 400);
+    assert!(error_line(&v).contains("already kept as variant_002"));
+
+    // A later `run` with more variants leaves the kept folder as it is.
+    let (code, _, run, _dir) = s.signal(libc::SIGINT, Duration::from_secs(10));
+    assert_eq!(code, Some(130));
+    let before = std::fs::read(run.join("variants/variant_002/level_2.vdb")).unwrap();
+    let o = shapeshifter(&["sample", run.join("exemplar").to_str().unwrap(), "--models", run.join("models").to_str().unwrap(), "-o", run.join("variants").to_str().unwrap(), "-n", "3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("kept from the studio: left as it is"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(run.join("variants/variant_002/level_2.vdb")).unwrap(), before);
+}
+
+#[test]
+fn a_cancelled_job_leaves_nothing_and_sigterm_ends_the_studio_within_seconds() {
+    let s = Studio::start();
+    let (_, a) = s.post("/api/jobs", json!({"kind": "sample", "n": 16, "seed": 5}));
+    let (_, b) = s.post("/api/jobs", json!({"kind": "sample", "n": 1, "seed": 6}));
+    let (a, b) = (a["id"].as_str().unwrap().to_string(), b["id"].as_str().unwrap().to_string());
+    // The second queues behind the first; cancelling the queued one
+    // cancels it at once, the running one between steps.
+    assert_eq!(s.get(&format!("/api/jobs/{b}")).1["state"], "queued");
+    assert_eq!(s.post(&format!("/api/jobs/{b}/cancel"), json!({})).1["state"], "cancelled");
+    let t = Instant::now();
+    while s.get(&format!("/api/jobs/{a}")).1["state"] == "queued" {
+        assert!(t.elapsed() < Duration::from_secs(30));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    s.post(&format!("/api/jobs/{a}/cancel"), json!({}));
+    let ja = s.finish(&a);
+    assert_eq!(ja["state"], "cancelled", "{ja}");
+    // Only whole variants stay in the gallery (none or those finished
+    // before the cancel), each with its verdict.
+    let (_, state) = s.get("/api/state");
+    for v in state["shapes"].as_array().unwrap().iter().filter(|v| v["origin"]["kind"] == "session") {
+        assert!(!v["verdict"].is_null(), "an unfinished variant stayed: {v}");
+    }
+    // A job running when SIGTERM comes: the studio ends within seconds,
+    // 143, nothing half-written in the run.
+    let (_, j) = s.post("/api/jobs", json!({"kind": "sample", "n": 16}));
+    let id = j["id"].as_str().unwrap().to_string();
+    while s.get(&format!("/api/jobs/{id}")).1["state"] == "queued" {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (code, took, run, _dir) = s.signal(libc::SIGTERM, Duration::from_secs(10));
+    assert_eq!(code, Some(143));
+    assert!(took < Duration::from_secs(5), "took {took:?}");
+    let names: Vec<String> = std::fs::read_dir(run.join("variants")).unwrap().flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+    let mut names = names;
+    names.sort();
+    assert_eq!(names, ["variant_000", "variant_001"], "the studio wrote into the run");
+}
