@@ -9,7 +9,7 @@ export PATH := $(or $(CARGO_HOME),$(HOME)/.cargo)/bin:$(PATH)
 CARGO_FEATURES := $(if $(filter 1,$(CUDA)),--features cuda,)
 OUT ?= out/demo
 
-.PHONY: setup setup-check build demo test test-slow figures-check bench bench-poisson decimate-bench fuzz clean cluster-test interop
+.PHONY: setup setup-check build demo test test-slow figures-check bench bench-poisson decimate-bench fuzz clean cluster-test interop studio-test studio-bench
 
 setup:
 	@bash scripts/setup.sh
@@ -65,6 +65,19 @@ cluster-test: build
 interop: build
 	cargo build --release $(CARGO_FEATURES) --example demo_exemplar
 	bash scripts/interop-test.sh
+
+# The studio's page driven by a real headless Chromium through WebDriver
+# (installs chromium, chromium-driver and the selenium client): load, pick a
+# variant, delete a box at level 1 with the mouse, regenerate, keep; the kept
+# folder read back; a screenshot in out/studio-test/. CI runs it.
+studio-test: build
+	bash scripts/studio-test.sh
+
+# The studio's speed: from an edit at 32^3, each finer level ready (the
+# demo's run, and the tower's where one is given: STUDIO_RUNS="out/demo out/tower").
+STUDIO_RUNS ?= $(OUT)
+studio-bench: build
+	cargo run --release $(CARGO_FEATURES) --example studio_bench -- $(STUDIO_RUNS)
 
 # Every benchmark of docs/performance.md (the ruined tower from
 # ../shared/data where it is present; synthetic shapes stand in otherwise).

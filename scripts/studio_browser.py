@@ -81,8 +81,9 @@ try:
     canvas = driver.find_element(By.ID, "canvas")
     w, h = canvas.size["width"], canvas.size["height"]
     # Offsets are from the canvas centre: the left view's middle is at -w/4.
-    (ActionChains(driver).move_to_element_with_offset(canvas, int(-w / 4 - w * 0.06), int(-h * 0.25))
-        .key_down(Keys.SHIFT).click_and_hold().move_by_offset(int(w * 0.12), int(h * 0.3)).release().key_up(Keys.SHIFT).perform())
+    # The rectangle covers the top of the shape across its width.
+    (ActionChains(driver).move_to_element_with_offset(canvas, int(-w / 4 - w * 0.2), int(-h * 0.4))
+        .key_down(Keys.SHIFT).click_and_hold().move_by_offset(int(w * 0.4), int(h * 0.22)).release().key_up(Keys.SHIFT).perform())
     box = wait("a box from the mouse", lambda: js("return window.studio.box"), 10)
     print(f"studio-test: box selected with the mouse: {box['min']}..{box['max']}")
     driver.find_element(By.ID, "op-delete").click()
