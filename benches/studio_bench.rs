@@ -34,8 +34,8 @@ fn main() -> anyhow::Result<()> {
     tch::set_num_threads(threads as i32);
     println!("studio_bench: {threads} libtorch threads, {repeats} regenerations per edit; seconds from the request to each level ready");
     for run in &runs {
-        let (studio, rx) = Studio::open(run, tch::Device::Cpu)?;
-        let _worker = studio.start(rx);
+        let studio = Studio::open(run, tch::Device::Cpu)?;
+        let _worker = studio.start();
         while !studio.ready.load(std::sync::atomic::Ordering::SeqCst) {
             std::thread::sleep(Duration::from_millis(20));
         }

@@ -135,6 +135,9 @@ try:
     kept = wait("the keep", lambda: next(s for s in state()["shapes"] if s["id"] == new)["kept_as"], 300)
     job = [j for j in state()["jobs"] if j["kind"] == "keep"][-1]
     wait("the keep job", lambda: [j for j in state()["jobs"] if j["id"] == job["id"]][0]["state"] == "done", 300)
+    # Its mesh, the USD asset and the evaluation follow in a finishing job.
+    wait("the finishing job", lambda: [j for j in state()["jobs"] if j["kind"] == "finish"] and
+         all(j["state"] == "done" for j in state()["jobs"] if j["kind"] == "finish"), 300)
     folder = os.path.join(RUN, "variants", kept)
     files = sorted(os.listdir(folder))
     print(f"studio-test: kept as {kept}: {' '.join(files)}")

@@ -305,9 +305,21 @@ fn an_edit_regenerated_and_kept_is_a_variant_folder_that_differs_where_it_was_ed
     // mesh and record; in the USD asset and eval.json.
     let (status, job) = s.post("/api/jobs", json!({"kind": "keep", "shape": shape}));
     assert_eq!(status, 202, "{job}");
+    // A person's job asked for after the keep runs before the run's
+    // finishing work (mesh, USD, eval) that the keep queues.
+    let (_, again) = s.post("/api/jobs", json!({"kind": "regenerate", "draft": "d1"}));
     let job = s.finish(job["id"].as_str().unwrap());
     assert_eq!(job["state"], "done", "{job}");
+    // The folder is there at once; its mesh, the USD asset and the
+    // evaluation follow in a finishing job.
     let folder = s.run.join("variants/variant_002");
+    assert!(folder.join("level_2.vdb").is_file() && folder.join("studio.json").is_file());
+    let (_, state) = s.get("/api/state");
+    let finishing = state["jobs"].as_array().unwrap().iter().find(|j| j["kind"] == "finish").expect("a finishing job").clone();
+    let finishing = s.finish(finishing["id"].as_str().unwrap());
+    assert_eq!(finishing["state"], "done", "{finishing}");
+    let again = s.finish(again["id"].as_str().unwrap());
+    assert!(again["started"].as_u64() < finishing["started"].as_u64(), "the regeneration waited for the finishing work: {again} {finishing}");
     for f in ["level_1.vdb", "level_2.vdb", "level_2.points.vdb", "level_2.png", "mesh.ply", "studio.json", "stage_sample.json"] {
         assert!(folder.join(f).is_file(), "{} lacks {f}", folder.display());
     }

@@ -1,8 +1,8 @@
 //! Keeping a variant made outside the sampling stage (the studio's edits and
 //! continuations) as a variant folder of the run: its level files and
-//! previews, then the run's later stages for it (its mesh, the USD asset,
-//! the evaluation, the contact sheet and report), so it is a variant like
-//! any other.
+//! previews ([`write_kept`]), then the run's later stages for it (its mesh,
+//! the USD asset, the evaluation, the contact sheet and report:
+//! [`finish_kept`]), so it is a variant like any other.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -33,13 +33,11 @@ pub fn next_index(paths: &RunPaths) -> usize {
     (0..).find(|&i| !variant_dir(&paths.variants(), i).exists()).unwrap_or(0)
 }
 
-/// Writes `kept` as the run's next variant folder and brings the run's
-/// outputs up to date with it: its mesh (the run's `[mesh]` settings), the
-/// USD asset over every variant, eval.json, the contact sheet and the
-/// report. The folder is written under a temporary name and renamed when
-/// whole, so a stop leaves either no folder or a whole one. Returns the
-/// folder and its name. `progress` is told of each step.
-pub fn keep_variant(paths: &RunPaths, config: &Config, kept: &KeptVariant, progress: &mut dyn FnMut(&str)) -> Result<(String, PathBuf)> {
+/// Writes `kept` as the run's next variant folder: its level files,
+/// previews, record and stamp, under a temporary name renamed when whole, so
+/// a stop leaves either no folder or a whole one. Returns its name and path.
+/// The run's later stages for it are [`finish_kept`]'s.
+pub fn write_kept(paths: &RunPaths, config: &Config, kept: &KeptVariant) -> Result<(String, PathBuf)> {
     let t = Instant::now();
     if kept.levels.iter().all(Level::is_empty) {
         return Err(Error::Invalid("the variant has no voxels: nothing to keep".into()));
@@ -52,7 +50,6 @@ pub fn keep_variant(paths: &RunPaths, config: &Config, kept: &KeptVariant, progr
     if staging.exists() {
         std::fs::remove_dir_all(&staging).map_err(|e| Error::file(&staging, e.to_string()))?;
     }
-    progress("writing the level files");
     let provenance = Provenance {
         exemplar: manifest.exemplar.clone(),
         seed: kept.seed,
@@ -63,16 +60,40 @@ pub fn keep_variant(paths: &RunPaths, config: &Config, kept: &KeptVariant, progr
     let preview = |level: &Level, path: &Path| super::encode::write_preview(level, &crate::render::preview_options(), path);
     dataset::write_variant(&staging, kept.levels, &provenance, Some(&preview), config.output.write_options())?;
     crate::util::fs::write_file(&staging.join(kept.record_name), kept.record)?;
-    mark_done(&staging, StampOf::Sample, &format!("kept:{}", crate::util::digest::short(&String::from_utf8_lossy(kept.record))), t.elapsed().as_secs_f64())?;
+    let digest = format!("kept:{}", crate::util::digest::short(&String::from_utf8_lossy(kept.record)));
+    mark_done(&staging, StampOf::Sample, &digest, t.elapsed().as_secs_f64())?;
     crate::util::interrupt::check()?;
     std::fs::rename(&staging, &dir).map_err(|e| Error::file(&dir, e.to_string()))?;
-    let count = index + 1;
-    progress("meshing");
-    super::run_mesh(paths, index..count, &config.mesh)?;
+    log::info!("kept {name} ({:.1} s)", t.elapsed().as_secs_f64());
+    Ok((name, dir))
+}
+
+/// The kept variant folders (with a [`super::layout::KEPT_RECORD`]) whose
+/// later stages have not run yet (no mesh).
+pub fn unfinished_kept(paths: &RunPaths) -> Vec<usize> {
+    (0..next_index(paths))
+        .filter(|&i| {
+            let d = variant_dir(&paths.variants(), i);
+            d.join(super::layout::KEPT_RECORD).is_file() && !d.join(super::layout::MESH_PLY).is_file()
+        })
+        .collect()
+}
+
+/// Brings the run's outputs up to date with its kept variants: the mesh of
+/// each kept folder that has none (the run's `[mesh]` settings), then the
+/// USD asset over every variant, eval.json, the contact sheet and the
+/// report. `progress` is told of each step.
+pub fn finish_kept(paths: &RunPaths, config: &Config, progress: &mut dyn FnMut(&str)) -> Result<()> {
+    let t = Instant::now();
+    let count = next_index(paths);
+    for i in unfinished_kept(paths) {
+        progress(&format!("meshing {}", variant_name(i)));
+        super::run_mesh(paths, i..i + 1, &config.mesh)?;
+    }
     progress("writing the USD asset");
     super::run_usd(paths, Some(count), config.output.meters_per_unit, config.output.usd_format)?;
-    progress("evaluating every variant");
+    progress(&format!("evaluating the {count} variants"));
     super::run_eval(paths, count)?;
-    log::info!("kept {name} in {:.1} s", t.elapsed().as_secs_f64());
-    Ok((name, dir))
+    log::info!("the run's mesh, USD asset and evaluation updated for its {count} variants in {:.1} s", t.elapsed().as_secs_f64());
+    Ok(())
 }

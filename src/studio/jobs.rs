@@ -2,18 +2,21 @@
 //! an edit's finer levels, keeping a variant. One worker thread owns the
 //! trained networks and runs one job at a time, in the order they were
 //! asked for (a second job queues; it never shares the cores unseen with
-//! the first). Each level a job makes is added to its shape as it finishes,
-//! so the page shows it at once. A job is cancelled between sampling steps.
+//! the first), but for the run's finishing work after a keep (meshing, the
+//! USD asset, the evaluation of every variant: a minute on the tower), which
+//! waits while a person's jobs are queued, and is done once for several
+//! keeps. Each level a job makes is added to its shape as it finishes, so
+//! the page shows it at once. A job is cancelled between sampling steps.
 
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::Instant;
 
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::learn::sample::{load_models, variant_seed, Models, SampleOptions};
+use crate::learn::sample::{load_models, Models, SampleOptions};
 use crate::level::Level;
 use crate::pipeline::sample::{models_needed, sample_variants_observed};
 
@@ -35,6 +38,9 @@ pub enum Work {
     Regenerate { draft: String, source: String, level: Level, seed: Option<SeedOf> },
     /// Writes a session variant into the run as a variant folder.
     Keep { shape: String },
+    /// The run's mesh, USD asset and evaluation brought up to date with its
+    /// kept variants (queued by a keep; runs when no other job waits).
+    Finish,
 }
 
 impl Work {
@@ -44,6 +50,7 @@ impl Work {
             Work::MoreLike { .. } => "more_like",
             Work::Regenerate { .. } => "regenerate",
             Work::Keep { .. } => "keep",
+            Work::Finish => "finish",
         }
     }
 }
@@ -84,10 +91,19 @@ pub struct JobStatus {
     pub progress: f64,
     pub levels: Vec<LevelReady>,
     pub seconds: f64,
+    /// When the worker took it: 1 for the first job it ran, 2 for the next...
+    pub started: Option<usize>,
     #[serde(skip)]
     cancel: Arc<AtomicBool>,
     #[serde(skip)]
     asked: Instant,
+}
+
+/// Jobs asked for and not started.
+#[derive(Default)]
+struct Queue {
+    items: VecDeque<(String, Work)>,
+    closed: bool,
 }
 
 /// The queue and every job's status.
@@ -95,22 +111,36 @@ pub struct Jobs {
     status: Mutex<Vec<JobStatus>>,
     /// Signalled on every change (tests and the benchmark wait on it).
     changed: Condvar,
-    queue: Mutex<Option<Sender<(String, Work)>>>,
+    queue: Mutex<Queue>,
+    available: Condvar,
     next: Mutex<usize>,
 }
 
 impl Jobs {
-    pub fn new() -> (Jobs, Receiver<(String, Work)>) {
-        let (tx, rx) = std::sync::mpsc::channel();
-        (Jobs { status: Mutex::new(Vec::new()), changed: Condvar::new(), queue: Mutex::new(Some(tx)), next: Mutex::new(1) }, rx)
+    pub fn new() -> Jobs {
+        Jobs { status: Mutex::new(Vec::new()), changed: Condvar::new(), queue: Mutex::default(), available: Condvar::new(), next: Mutex::new(1) }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Vec<JobStatus>> {
         self.status.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Queues `work`; its id.
+    fn lock_queue(&self) -> std::sync::MutexGuard<'_, Queue> {
+        self.queue.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Queues `work`; its id. A finishing job already queued takes this one's
+    /// place (it will finish every kept variant).
     pub fn submit(&self, work: Work) -> Result<String> {
+        let mut queue = self.lock_queue();
+        if queue.closed {
+            return Err(Error::Invalid("the studio is stopping: no new jobs".into()));
+        }
+        if matches!(work, Work::Finish) {
+            if let Some((id, _)) = queue.items.iter().find(|(_, w)| matches!(w, Work::Finish)) {
+                return Ok(id.clone());
+            }
+        }
         let id = {
             let mut n = self.next.lock().unwrap_or_else(|e| e.into_inner());
             let id = format!("j{n}");
@@ -126,17 +156,31 @@ impl Jobs {
             progress: 0.0,
             levels: Vec::new(),
             seconds: 0.0,
+            started: None,
             cancel: Arc::new(AtomicBool::new(false)),
             asked: Instant::now(),
         });
-        let queue = self.queue.lock().unwrap_or_else(|e| e.into_inner());
-        queue
-            .as_ref()
-            .ok_or_else(|| Error::Invalid("the studio is stopping: no new jobs".into()))?
-            .send((id.clone(), work))
-            .map_err(|_| Error::Invalid("the studio's worker has stopped".into()))?;
+        queue.items.push_back((id.clone(), work));
+        drop(queue);
+        self.available.notify_all();
         self.changed.notify_all();
         Ok(id)
+    }
+
+    /// The next job to run: the first a person asked for, else the first
+    /// finishing job; None once the queue is closed.
+    fn take(&self) -> Option<(String, Work)> {
+        let mut queue = self.lock_queue();
+        loop {
+            if queue.closed {
+                return None;
+            }
+            let at = queue.items.iter().position(|(_, w)| !matches!(w, Work::Finish)).or(if queue.items.is_empty() { None } else { Some(0) });
+            if let Some(at) = at {
+                return queue.items.remove(at);
+            }
+            queue = self.available.wait(queue).unwrap_or_else(|e| e.into_inner());
+        }
     }
 
     pub fn list(&self) -> Vec<JobStatus> {
@@ -165,7 +209,8 @@ impl Jobs {
     /// Stops taking jobs and cancels those queued or running (the studio is
     /// ending).
     pub fn close(&self) {
-        self.queue.lock().unwrap_or_else(|e| e.into_inner()).take();
+        self.lock_queue().closed = true;
+        self.available.notify_all();
         for j in self.lock().iter() {
             j.cancel.store(true, Ordering::SeqCst);
         }
@@ -204,9 +249,9 @@ impl JobStatus {
     }
 }
 
-/// The worker: loads the networks, then runs the jobs `rx` brings one at a
-/// time until the queue closes.
-pub fn worker(studio: Arc<Studio>, rx: Receiver<(String, Work)>) {
+/// The worker: loads the networks, then runs the queued jobs one at a time
+/// until the queue closes.
+pub fn worker(studio: Arc<Studio>) {
     let models = (|| {
         let config = &studio.config;
         let needed = models_needed(config, &studio.exemplar, None);
@@ -221,12 +266,15 @@ pub fn worker(studio: Arc<Studio>, rx: Receiver<(String, Work)>) {
         }
     };
     studio.ready.store(true, Ordering::SeqCst);
-    while let Ok((id, work)) = rx.recv() {
+    let mut taken = 0;
+    while let Some((id, work)) = studio.jobs.take() {
         let Some(job) = studio.jobs.get(&id) else { continue };
         if job.cancel.load(Ordering::SeqCst) {
             continue;
         }
+        taken += 1;
         studio.jobs.update(&id, |j| {
+            j.started = Some(taken);
             j.state = JobState::Running;
             j.message = "running".into();
         });
@@ -267,8 +315,10 @@ fn job_outputs(studio: &Studio, id: &str) -> Vec<String> {
 }
 
 fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, started: Instant) -> Result<String> {
-    if let Work::Keep { shape } = work {
-        return keep(studio, id, shape);
+    match work {
+        Work::Keep { shape } => return keep(studio, id, shape),
+        Work::Finish => return finish(studio, id),
+        _ => {}
     }
     let models = models.ok_or_else(|| {
         let why = studio.load_error.lock().unwrap_or_else(|e| e.into_inner()).clone().unwrap_or_default();
@@ -292,7 +342,7 @@ fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, star
             let made_by = format!("edit of {source} at level {} ({draft})", level.index);
             return regenerate(studio, models, id, level, s, made_by, started);
         }
-        Work::Keep { .. } => unreachable!("handled above"),
+        Work::Keep { .. } | Work::Finish => unreachable!("handled above"),
     };
     if start > finest {
         return Err(Error::Invalid(format!("nothing finer to make: the finest level is {finest}")));
@@ -342,23 +392,30 @@ fn keep(studio: &Studio, id: &str, shape: &str) -> Result<String> {
     let record = serde_json::to_vec_pretty(&StudioRecord { made_by, seed }).map_err(|e| Error::Invalid(e.to_string()))?;
     let kept = crate::pipeline::keep::KeptVariant {
         levels: &levels,
-        seed: seed.map(|s| variant_seed(s.seed, s.index)),
+        seed: seed.map(|s| s.seed),
         record: &record,
         record_name: STUDIO_RECORD,
     };
-    let mut progress = |what: &str| studio.jobs.update(id, |j| j.message = what.to_string());
-    let (name, dir) = crate::pipeline::keep::keep_variant(&studio.paths, &studio.config, &kept, &mut progress)?;
-    let eval = studio.read_eval();
-    studio.gallery.add_run_variant(name.clone(), dir.clone(), eval.as_ref());
-    if let Some(e) = &eval {
-        studio.gallery.refresh_verdicts(e);
-    }
+    let (name, dir) = crate::pipeline::keep::write_kept(&studio.paths, &studio.config, &kept)?;
+    studio.gallery.add_run_variant(name.clone(), dir.clone(), None);
     studio.gallery.with(shape, |s| {
         s.kept_as = Some(name.clone());
         Ok(())
     })?;
     studio.jobs.update(id, |j| j.outputs = vec![shape.to_string(), name.clone()]);
-    Ok(format!("kept as {}", dir.display()))
+    studio.jobs.submit(Work::Finish)?;
+    Ok(format!("kept as {}; its mesh, the USD asset and the evaluation follow", dir.display()))
+}
+
+/// The run's mesh, USD asset and evaluation for its kept variants; the
+/// gallery's verdicts from the new eval.json.
+fn finish(studio: &Studio, id: &str) -> Result<String> {
+    let mut progress = |what: &str| studio.jobs.update(id, |j| j.message = what.to_string());
+    crate::pipeline::keep::finish_kept(&studio.paths, &studio.config, &mut progress)?;
+    if let Some(e) = studio.read_eval() {
+        studio.gallery.refresh_verdicts(&e);
+    }
+    Ok("the run's mesh, USD asset and eval.json include every kept variant".into())
 }
 
 impl Studio {

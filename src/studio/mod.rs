@@ -107,7 +107,7 @@ impl Studio {
     /// Opens the run folder `dir` (its encoded exemplar, the configuration
     /// its networks were trained under, its variants). The networks are
     /// loaded by the worker ([`Studio::start`]).
-    pub fn open(dir: &Path, device: tch::Device) -> Result<(Arc<Studio>, std::sync::mpsc::Receiver<(String, Work)>)> {
+    pub fn open(dir: &Path, device: tch::Device) -> Result<Arc<Studio>> {
         let paths = RunPaths::new(dir);
         let recorded = paths.models().join(CONFIG);
         if !recorded.is_file() {
@@ -120,7 +120,7 @@ impl Studio {
         let (manifest, exemplar) = dataset::read(&paths.exemplar())?;
         let eval = read_json(&paths.eval_json());
         let gallery = Gallery::open(&exemplar, &paths.variants(), eval.as_ref())?;
-        let (jobs, rx) = Jobs::new();
+        let jobs = Jobs::new();
         let studio = Studio {
             paths,
             config,
@@ -135,16 +135,17 @@ impl Studio {
             ready: AtomicBool::new(false),
             load_error: Mutex::new(None),
         };
-        Ok((Arc::new(studio), rx))
+        // Kept variants a stopped studio did not finish (no mesh yet).
+        if !crate::pipeline::keep::unfinished_kept(&studio.paths).is_empty() {
+            studio.jobs.submit(Work::Finish)?;
+        }
+        Ok(Arc::new(studio))
     }
 
     /// Starts the worker that loads the networks and runs the jobs.
-    pub fn start(self: &Arc<Self>, rx: std::sync::mpsc::Receiver<(String, Work)>) -> std::thread::JoinHandle<()> {
+    pub fn start(self: &Arc<Self>) -> std::thread::JoinHandle<()> {
         let studio = self.clone();
-        std::thread::Builder::new()
-            .name("studio-worker".into())
-            .spawn(move || jobs::worker(studio, rx))
-            .expect("a thread starts")
+        std::thread::Builder::new().name("studio-worker".into()).spawn(move || jobs::worker(studio)).expect("a thread starts")
     }
 
     pub fn read_eval(&self) -> Option<serde_json::Value> {
@@ -330,8 +331,8 @@ pub fn run_studio(r: &StudioRequest, announce: &mut dyn FnMut(&str)) -> Result<(
     }
     let device = crate::pipeline::run::device(r.device_spec)?;
     let _lock = crate::util::lock::lock(r.dir, crate::util::lock::Mode::Exclusive, r.wait, "studio")?;
-    let (studio, rx) = Studio::open(r.dir, device)?;
-    let worker = studio.start(rx);
+    let studio = Studio::open(r.dir, device)?;
+    let worker = studio.start();
     let served = http::serve(studio.clone(), http::ServeOptions { port: r.port, token: None })?;
     announce(&served.url());
     while crate::util::interrupt::requested().is_none() && !worker.is_finished() {
