@@ -169,7 +169,8 @@ pub enum Command {
     ///
     /// Example: shapeshifter sample out/tower -n 10 --seed 1 -o out/tower_variants --extent 2,1,1
     Sample {
-        /// Folder written by `encode` (and `train`).
+        /// A run folder (its exemplar/ and models/), or a folder written by
+        /// `encode` (and `train`).
         dir: PathBuf,
         #[arg(short, long)]
         output: PathBuf,

@@ -104,6 +104,44 @@ fn edit_copies_and_deletes_boxes() {
     let o = shapeshifter(&["edit", src.to_str().unwrap(), "-o", oob.to_str().unwrap(), "copy", "--box", "0,0,0:31,31,31", "--to", "10,0,0"]);
     assert_clean_failure(&o, "level_1.vdb", "grid");
     assert!(!oob.exists());
+    // Quiet or not, the edit is made: the same voxels written.
+    let quiet = dir.path().join("quiet.vdb");
+    let o = shapeshifter(&["-q", "edit", src.to_str().unwrap(), "-o", quiet.to_str().unwrap(), "delete", "--box", "0,0,0:15,31,31"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (q, _) = vdb::read_level(&quiet).expect("edit -q writes its file");
+    assert_eq!((q.coords, q.offsets, q.colours), (del.coords, del.offsets, del.colours));
+}
+
+/// `sample RUN` takes a run folder as its help says (its exemplar/ and
+/// models/), and a sampling that fails leaves no output folder it made.
+#[test]
+fn sample_takes_a_run_folder_and_a_failed_sample_leaves_no_folder() {
+    let run = tiny_trained_run();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("variants");
+    let o = shapeshifter(&["-q", "sample", run.to_str().unwrap(), "-n", "1", "--seed", "3", "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("variant_000/level_2.vdb").is_file());
+    // The same from the exemplar folder with --models: the same variant.
+    let out2 = dir.path().join("variants2");
+    let o = shapeshifter(&[
+        "-q", "sample", run.join("exemplar").to_str().unwrap(), "--models", run.join("models").to_str().unwrap(), "-n", "1", "--seed", "3",
+        "-o", out2.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let a = vdb::read_level(&out.join("variant_000/level_2.vdb")).unwrap().0;
+    let b = vdb::read_level(&out2.join("variant_000/level_2.vdb")).unwrap().0;
+    assert_eq!((a.coords, a.offsets), (b.coords, b.offsets));
+    // Continuing from a level file of the wrong resolution (the exemplar's
+    // 32^3 level relabelled level 0) fails: no folder left.
+    let failed = dir.path().join("failed");
+    let wrong = dir.path().join("wrong.vdb");
+    let (mut level, provenance) = vdb::read_level(&run.join("exemplar/level_1.vdb")).unwrap();
+    level.index = 0;
+    vdb::write_level(&wrong, &level, &provenance, Default::default()).unwrap();
+    let o2 = shapeshifter(&["sample", run.to_str().unwrap(), "-n", "1", "--from", wrong.to_str().unwrap(), "-o", failed.to_str().unwrap()]);
+    assert_eq!(o2.status.code(), Some(1), "{}", stderr(&o2));
+    assert!(!failed.exists(), "a failed sample left {}: {:?}", failed.display(), listing(&failed));
 }
 
 #[test]

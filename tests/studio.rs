@@ -8,43 +8,11 @@
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 
-use crate::common::{shapeshifter, stderr};
-
-/// A run of the demo exemplar through 64^3 (levels 16, 32, 64, every one by
-/// a small network), two variants: made once per test binary, copied by
-/// each test (a studio writes into its run).
-fn tiny_run() -> &'static Path {
-    static RUN: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
-    &RUN.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("run");
-        let mut args = vec!["-q", "demo", "-o", out.to_str().unwrap(), "-n", "2", "--jobs", "2"];
-        for s in [
-            "encode.sampling_resolution=128",
-            "encode.finest_resolution=64",
-            "model.channels=8",
-            "model.upsampler_channels=8",
-            "train.level0_iterations=150",
-            "train.upper_iterations=60",
-            "train.upsampler_iterations=60",
-            "sample.level0_candidates=1",
-            "sample.attempts=1",
-            "sample.level0_steps=20",
-            "sample.upper_steps=4",
-        ] {
-            args.extend(["--set", s]);
-        }
-        let o = shapeshifter(&args);
-        assert!(o.status.success(), "tiny run: {}", stderr(&o));
-        (dir, out)
-    })
-    .1
-}
+use crate::common::{shapeshifter, stderr, tiny_trained_run};
 
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
@@ -71,7 +39,7 @@ impl Studio {
     fn start() -> Studio {
         let dir = tempfile::tempdir().unwrap();
         let run = dir.path().join("run");
-        copy_dir(tiny_run(), &run);
+        copy_dir(tiny_trained_run(), &run);
         let mut child = Command::new(env!("CARGO_BIN_EXE_shapeshifter"))
             .args(["studio", run.to_str().unwrap(), "--port", "0"])
             .stdout(Stdio::piped())

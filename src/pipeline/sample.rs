@@ -428,7 +428,12 @@ pub struct SampleRecord {
 /// recorded at training time with the request's overrides.
 pub fn sample_command(dir: &Path, output: &Path, r: &SampleRequest) -> Result<SampleRecord> {
     let t = Instant::now();
-    let models = r.models.map_or_else(|| RunPaths::new(dir).models(), Path::to_path_buf);
+    // A run folder (what `run` writes) stands for its exemplar/ and models/.
+    let run = RunPaths::new(dir);
+    let is_run = !dir.join(dataset::MANIFEST).is_file() && run.exemplar().join(dataset::MANIFEST).is_file();
+    let (dir, default_models) = if is_run { (run.exemplar(), run.models()) } else { (dir.to_path_buf(), run.models()) };
+    let dir = dir.as_path();
+    let models = r.models.map_or(default_models, Path::to_path_buf);
     let recorded = models.join(super::layout::CONFIG);
     if !recorded.is_file() {
         return Err(Error::Invalid(format!(
@@ -448,8 +453,23 @@ pub fn sample_command(dir: &Path, output: &Path, r: &SampleRequest) -> Result<Sa
     // An extent past the budget is refused before anything is made.
     let level0 = crate::io::vdb::read_level(&dir.join(dataset::level_file_name(0)))?.0;
     sample::level0_box(&level0, r.extent)?;
-    let _lock = crate::util::lock::lock(output, crate::util::lock::Mode::Exclusive, r.wait, "sample")?;
-    let dirs = sample_into(dir, &models, output, &config, device, &options, r.from, r.previews)?;
+    let made_output = !output.exists();
+    let lock = crate::util::lock::lock(output, crate::util::lock::Mode::Exclusive, r.wait, "sample")?;
+    let dirs = match sample_into(dir, &models, output, &config, device, &options, r.from, r.previews) {
+        Ok(dirs) => dirs,
+        Err(e) => {
+            // A folder this command made and left with nothing but its lock
+            // is removed: a failed command leaves nothing behind.
+            drop(lock);
+            let only_lock = std::fs::read_dir(output).map_or(false, |entries| {
+                entries.flatten().all(|e| e.file_name() == std::ffi::OsStr::new(crate::util::lock::LOCK_FILE))
+            });
+            if made_output && only_lock {
+                let _ = std::fs::remove_dir_all(output);
+            }
+            return Err(e);
+        }
+    };
     Ok(SampleRecord {
         models,
         output: output.to_path_buf(),

@@ -76,7 +76,10 @@ pub fn serve(studio: Arc<Studio>, options: ServeOptions) -> Result<Served> {
                 .spawn(move || {
                     while !stop.load(Ordering::SeqCst) {
                         match server.recv_timeout(Duration::from_millis(250)) {
-                            Ok(Some(request)) => answer(&studio, &token, port, request),
+                            // A bug answering one request drops that request, not the thread.
+                            Ok(Some(request)) => {
+                                let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| answer(&studio, &token, port, request)));
+                            }
                             Ok(None) => {}
                             Err(_) => break,
                         }

@@ -279,7 +279,12 @@ pub fn worker(studio: Arc<Studio>) {
             j.message = "running".into();
         });
         let started = Instant::now();
-        let result = crate::util::interrupt::cancellable(job.cancel.clone(), || run_job(&studio, models.as_ref(), &id, &work, started));
+        // A bug in a job fails that job, not the worker (the panic hook has
+        // printed where it happened).
+        let result = crate::util::interrupt::cancellable(job.cancel.clone(), || {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_job(&studio, models.as_ref(), &id, &work, started)))
+                .unwrap_or_else(|_| Err(Error::Invalid("internal error: a bug in shapeshifter (the studio's log names where)".into())))
+        });
         let seconds = started.elapsed().as_secs_f64();
         let (state, message) = match result {
             Ok(msg) => (JobState::Done, msg),

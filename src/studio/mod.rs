@@ -338,8 +338,13 @@ pub fn run_studio(r: &StudioRequest, announce: &mut dyn FnMut(&str)) -> Result<(
     while crate::util::interrupt::requested().is_none() && !worker.is_finished() {
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
+    let worker_ended = worker.is_finished() && crate::util::interrupt::requested().is_none();
     studio.jobs.close();
     served.stop();
     let _ = worker.join();
-    crate::util::interrupt::check()
+    crate::util::interrupt::check()?;
+    if worker_ended {
+        return Err(Error::Invalid("the studio's worker stopped unexpectedly (a bug in shapeshifter; the line above says where)".into()));
+    }
+    Ok(())
 }

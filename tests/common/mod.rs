@@ -92,3 +92,34 @@ pub fn listing(dir: &Path) -> Vec<String> {
     v.sort();
     v
 }
+
+/// A run of the demo exemplar through 64^3 (levels 16, 32, 64, every one by
+/// a small network), two variants: made once per test binary (about 30 s).
+/// Tests that write into a run copy it first.
+pub fn tiny_trained_run() -> &'static Path {
+    static RUN: std::sync::OnceLock<(tempfile::TempDir, PathBuf)> = std::sync::OnceLock::new();
+    &RUN.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("run");
+        let mut args = vec!["-q", "demo", "-o", out.to_str().unwrap(), "-n", "2", "--jobs", "2"];
+        for s in [
+            "encode.sampling_resolution=128",
+            "encode.finest_resolution=64",
+            "model.channels=8",
+            "model.upsampler_channels=8",
+            "train.level0_iterations=150",
+            "train.upper_iterations=60",
+            "train.upsampler_iterations=60",
+            "sample.level0_candidates=1",
+            "sample.attempts=1",
+            "sample.level0_steps=20",
+            "sample.upper_steps=4",
+        ] {
+            args.extend(["--set", s]);
+        }
+        let o = shapeshifter(&args);
+        assert!(o.status.success(), "tiny run: {}", stderr(&o));
+        (dir, out)
+    })
+    .1
+}
