@@ -4,7 +4,7 @@
 //! page's points for the finest level. Prints, per run and per edited level,
 //! the median and range over several regenerations.
 //!
-//! cargo run --release --example studio_bench -- RUN_DIR... [--repeats N]
+//! cargo run --release --example studio_bench -- RUN_DIR... [--repeats N] [--precision auto|f32|bf16]
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -19,10 +19,18 @@ fn median(v: &mut [f64]) -> f64 {
 fn main() -> anyhow::Result<()> {
     let mut runs: Vec<PathBuf> = Vec::new();
     let mut repeats = 5usize;
+    let mut precision = shapeshifter::studio::Precision::Auto;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--repeats" => repeats = args.next().and_then(|n| n.parse().ok()).unwrap_or(5),
+            "--precision" => {
+                precision = match args.next().as_deref() {
+                    Some("f32") => shapeshifter::studio::Precision::F32,
+                    Some("bf16") => shapeshifter::studio::Precision::Bf16,
+                    _ => shapeshifter::studio::Precision::Auto,
+                }
+            }
             _ => runs.push(a.into()),
         }
     }
@@ -34,13 +42,14 @@ fn main() -> anyhow::Result<()> {
     tch::set_num_threads(threads as i32);
     println!("studio_bench: {threads} libtorch threads, {repeats} regenerations per edit; seconds from the request to each level ready");
     for run in &runs {
-        let studio = Studio::open(run, tch::Device::Cpu)?;
+        let studio = Studio::open(run, tch::Device::Cpu, precision)?;
         let _worker = studio.start();
         while !studio.ready.load(std::sync::atomic::Ordering::SeqCst) {
             std::thread::sleep(Duration::from_millis(20));
         }
         let resolutions: Vec<u32> = studio.exemplar.iter().map(|l| l.resolution).collect();
-        println!("\n{} ({} levels {:?}, networks for {})", run.display(), resolutions.len(), resolutions, studio.state().network_levels);
+        let st = studio.state();
+        println!("\n{} ({} levels {:?}, networks for {}, products in {})", run.display(), resolutions.len(), resolutions, st.network_levels, st.compute);
         let source = studio.gallery.summaries().into_iter().find(|s| s.id.starts_with("variant_")).map(|s| s.id)
             .ok_or_else(|| anyhow::anyhow!("{}: no variant to edit", run.display()))?;
         for edit_level in [0usize, 1] {

@@ -225,6 +225,10 @@ pub enum Command {
         port: u16,
         #[arg(long, default_value = "auto")]
         device: String,
+        /// How the networks multiply: auto (bf16 where the device has it in
+        /// hardware, else f32), f32 (as `sample`), bf16.
+        #[arg(long, value_enum, default_value_t = shapeshifter::studio::Precision::Auto)]
+        precision: shapeshifter::studio::Precision,
     },
     /// The whole pipeline: encode, train, sample, preview, evaluate. Several
     /// meshes: one sub-folder each; a failing mesh is reported and skipped.
@@ -1097,7 +1101,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(if report.differences.is_empty() && report.compared > 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
         }
-        Command::Studio { dir, port, device: dev } => {
+        Command::Studio { dir, port, device: dev, precision } => {
             // Interactive: one job at a time on every core, unless the
             // thread count was given (the batch default of 1 suits processes
             // that run side by side).
@@ -1105,7 +1109,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             if !given {
                 tch::set_num_threads(std::thread::available_parallelism().map_or(1, |n| n.get()) as i32);
             }
-            let request = shapeshifter::studio::StudioRequest { dir: &dir, port, device_spec: &dev, wait: cli.wait };
+            let request = shapeshifter::studio::StudioRequest { dir: &dir, port, device_spec: &dev, precision, wait: cli.wait };
             shapeshifter::studio::run_studio(&request, &mut |url| {
                 // On stdout, whatever the log level: a script reads the address.
                 println!("studio: {url}");

@@ -298,6 +298,9 @@ fn an_edit_regenerated_and_kept_is_a_variant_folder_that_differs_where_it_was_ed
     assert!(eval["variants"].as_array().unwrap().iter().any(|v| v["name"] == "variant_002"));
     let record: Value = serde_json::from_slice(&std::fs::read(folder.join("studio.json")).unwrap()).unwrap();
     assert!(record["made_by"].as_str().unwrap().contains("edit of variant_001 at level 1"), "{record}");
+    let (_, state) = s.get("/api/state");
+    assert_eq!(record["compute"], state["compute"], "the record says how the products were made");
+    assert!(["f32", "bf16"].contains(&record["compute"].as_str().unwrap()));
     // It reads back and differs from its source where it was edited: no
     // voxel of its level 1 is in the deleted upper half but the pasted
     // exemplar's (which lie in y < 7).

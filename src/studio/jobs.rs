@@ -266,6 +266,8 @@ pub fn worker(studio: Arc<Studio>) {
         }
     };
     studio.ready.store(true, Ordering::SeqCst);
+    // Per thread: the products of every job this worker runs.
+    let _precision = crate::learn::sparse::bf16_compute_scope(studio.bf16);
     let mut taken = 0;
     while let Some((id, work)) = studio.jobs.take() {
         let Some(job) = studio.jobs.get(&id) else { continue };
@@ -394,7 +396,7 @@ fn keep(studio: &Studio, id: &str, shape: &str) -> Result<String> {
         }
         Ok((s.levels.values().map(|l| (**l).clone()).collect::<Vec<Level>>(), s.seed, made_by))
     })?;
-    let record = serde_json::to_vec_pretty(&StudioRecord { made_by, seed }).map_err(|e| Error::Invalid(e.to_string()))?;
+    let record = serde_json::to_vec_pretty(&StudioRecord { made_by, seed, compute: (if studio.bf16 { "bf16" } else { "f32" }).into() }).map_err(|e| Error::Invalid(e.to_string()))?;
     let kept = crate::pipeline::keep::KeptVariant {
         levels: &levels,
         seed: seed.map(|s| s.seed),

@@ -127,6 +127,9 @@ pub const STUDIO_RECORD: &str = crate::pipeline::layout::KEPT_RECORD;
 pub struct StudioRecord {
     pub made_by: String,
     pub seed: Option<SeedOf>,
+    /// How its networks multiplied: "f32" (as `sample`) or "bf16".
+    #[serde(default)]
+    pub compute: String,
 }
 
 /// The shapes of a studio: the exemplar first, then the run's variants, then
