@@ -225,6 +225,13 @@ fn the_studio_answers_only_its_token_and_loopback_and_refuses_bad_requests_with_
     assert!(answered.iter().all(|&c| c == 200), "{answered:?}");
     eprintln!("50 concurrent requests answered in {:.2} s", t.elapsed().as_secs_f64());
 
+    // A folder that is not a trained run: exit 2, one line, nothing written.
+    let empty = tempfile::tempdir().unwrap();
+    let o = shapeshifter(&["studio", empty.path().to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).lines().filter(|l| l.starts_with("error")).count() == 1 && stderr(&o).contains("no trained models here"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_dir(empty.path()).unwrap().count(), 0, "the studio wrote into a folder it refused");
+
     // The run folder is held: a run on it is refused while the studio serves.
     let o = shapeshifter(&["demo", "-o", s.run.to_str().unwrap(), "-n", "2"]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));

@@ -356,8 +356,10 @@ pub fn run_studio(r: &StudioRequest, announce: &mut dyn FnMut(&str)) -> Result<(
         return Err(Error::Usage(format!("{}: no such run folder", r.dir.display())));
     }
     let device = crate::pipeline::run::device(r.device_spec)?;
-    let _lock = crate::util::lock::lock(r.dir, crate::util::lock::Mode::Exclusive, r.wait, "studio")?;
+    // Opened (read only) before the lock: a folder that is not a run gets
+    // its error and no lock file.
     let studio = Studio::open(r.dir, device, r.precision)?;
+    let _lock = crate::util::lock::lock(r.dir, crate::util::lock::Mode::Exclusive, r.wait, "studio")?;
     log::info!("studio: the networks multiply in {}", if studio.bf16 { "bf16" } else { "f32" });
     let worker = studio.start();
     let served = http::serve(studio.clone(), http::ServeOptions { port: r.port, token: None })?;
