@@ -402,6 +402,7 @@ fn gaussian(rows: usize, seed: u64, level: usize, step: usize, device: Device) -
 }
 
 /// Everything one variant's coarse-to-fine pass needs.
+#[derive(Clone, Copy)]
 struct OneVariant<'a> {
     models: &'a Models,
     /// The exemplar's levels (a bent start bends them).
@@ -823,7 +824,7 @@ impl OneVariant<'_> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
         let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
         let Some((ex_level, ex_structure)) = reference.filter(|_| attempts > 1) else {
-            let (levels, _, bend) = self.pass(self.seed, resolution0, opts, from, self.last, true)?;
+            let (levels, _, bend) = self.pass(self.seed, resolution0, opts, from, self.last)?;
             return Ok(SampledVariant { levels, bend });
         };
         let (mut levels, cur, bend) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
@@ -832,10 +833,10 @@ impl OneVariant<'_> {
         match &bend {
             // A bent pass stays the exemplar bent up to the variant's last level.
             Some(b) => {
-                self.bent_levels(b, next, self.last, &mut levels, true)?;
+                self.bent_levels(b, next, self.last, &mut levels)?;
             }
             None => {
-                self.descend(cur, next, self.last, opts, &mut levels, true)?;
+                self.descend(cur, next, self.last, opts, &mut levels)?;
             }
         }
         Ok(SampledVariant { levels, bend })
@@ -853,8 +854,11 @@ impl OneVariant<'_> {
         attempts: usize,
     ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
         let params = structure_params(opts);
+        // Attempts are not told of their levels: the kept one's are told
+        // once it is kept.
+        let quiet = OneVariant { told: None, ..*self };
         let (a, rank, kept) = keep_attempt(attempts, opts.reject_copies, |a| {
-            let (levels, cur, bend) = self.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index, false)?;
+            let (levels, cur, bend) = quiet.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
             let level = &levels[ex_level.index];
             let rank = if level.is_empty() {
                 AttemptRank { whole: false, new: false, score: 0.0 }
@@ -899,7 +903,6 @@ impl OneVariant<'_> {
     /// `level0_seed` (or `from`, continued), the finer levels from the
     /// variant's own seed (so continuing from an unedited level reproduces
     /// the finer levels of the pass that made it, whichever attempt that was).
-    #[allow(clippy::too_many_arguments)]
     fn pass(
         &self,
         level0_seed: u64,
@@ -907,7 +910,6 @@ impl OneVariant<'_> {
         opts: &SampleOptions,
         from: Option<&Level>,
         last: usize,
-        tell: bool,
     ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
         let mut out = Vec::new();
         let mut bend = None;
@@ -915,14 +917,12 @@ impl OneVariant<'_> {
             None => match self.chosen_level0(level0_seed, resolution0, opts)? {
                 Start::Drawn(pruned, level) => {
                     let (pruned, level) = self.repaired(pruned, level)?;
-                    if tell {
-                        self.tell(&level);
-                    }
+                    self.tell(&level);
                     out.push(level);
                     (pruned, 1)
                 }
                 Start::Bent(b) => {
-                    let cur = self.bent_levels(&b, 0, last, &mut out, tell)?.expect("level 0 at least");
+                    let cur = self.bent_levels(&b, 0, last, &mut out)?.expect("level 0 at least");
                     bend = Some(b);
                     (cur, out.len())
                 }
@@ -932,7 +932,7 @@ impl OneVariant<'_> {
                 (one, level.index + 1)
             }
         };
-        let cur = self.descend(cur, first, last, opts, &mut out, tell)?;
+        let cur = self.descend(cur, first, last, opts, &mut out)?;
         Ok((out, cur, bend))
     }
 
@@ -948,16 +948,14 @@ impl OneVariant<'_> {
     /// no network runs on a bent pass); each through the tensor, so its rows
     /// are in the grid's order. The last one's pruned tensor; None when
     /// there is no level to make.
-    fn bent_levels(&self, bend: &Bend, first: usize, last: usize, out: &mut Vec<Level>, tell: bool) -> Result<Option<SparseTensor>> {
+    fn bent_levels(&self, bend: &Bend, first: usize, last: usize, out: &mut Vec<Level>) -> Result<Option<SparseTensor>> {
         let mut cur = None;
         for l in first..=last.min(self.last) {
             let bent = bend.bent(self.exemplar_levels, l);
             let pruned = SparseTensor::from_level(&bent, self.models.device)?.prune_by_mask()?;
             let level = pruned.to_level(l, self.frame)?;
             let (pruned, level) = self.repaired(pruned, level)?;
-            if tell {
-                self.tell(&level);
-            }
+            self.tell(&level);
             out.push(level);
             cur = Some(pruned);
         }
@@ -967,7 +965,7 @@ impl OneVariant<'_> {
     /// Levels `first..=last` (at most the variant's last) from the pruned
     /// level below them, `cur`, appended to `out`; the last one's pruned
     /// tensor.
-    fn descend(&self, mut cur: SparseTensor, first: usize, last: usize, opts: &SampleOptions, out: &mut Vec<Level>, tell: bool) -> Result<SparseTensor> {
+    fn descend(&self, mut cur: SparseTensor, first: usize, last: usize, opts: &SampleOptions, out: &mut Vec<Level>) -> Result<SparseTensor> {
         let (seed, dev) = (self.seed, self.models.device);
         for l in first..=last.min(self.last) {
             if cur.is_empty() {
@@ -976,9 +974,7 @@ impl OneVariant<'_> {
                     Tensor::zeros([0, FEATURE_CHANNELS as i64], (Kind::Float, dev)),
                 )?;
                 let level = empty.to_level(l, self.frame)?;
-                if tell {
-                    self.tell(&level);
-                }
+                self.tell(&level);
                 out.push(level);
                 cur = empty;
                 continue;
@@ -993,9 +989,7 @@ impl OneVariant<'_> {
             let pruned = x.prune_by_mask()?;
             let level = pruned.to_level(l, self.frame)?;
             let (pruned, level) = self.repaired(pruned, level)?;
-            if tell {
-                self.tell(&level);
-            }
+            self.tell(&level);
             cur = pruned;
             out.push(level);
         }

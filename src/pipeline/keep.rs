@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::layout::{variant_dir, variant_name};
+use super::layout::{variant_dir, variant_name, KEPT_RECORD, MESH_PLY};
 use super::stamp::{mark_done, StampOf};
 use super::RunPaths;
 use crate::config::Config;
@@ -16,15 +16,15 @@ use crate::io::dataset;
 use crate::io::vdb::Provenance;
 use crate::level::Level;
 
-/// What a kept variant's folder records of how it was made
-/// ([`crate::studio::STUDIO_RECORD`]), and its stamp's digest.
+/// A variant to keep: its levels, and what its folder records of how it
+/// was made.
 pub struct KeptVariant<'a> {
     pub levels: &'a [Level],
-    /// The seed its finer levels were sampled from, where it has one.
+    /// The run seed its finer levels were sampled from, where it has one.
     pub seed: Option<u64>,
-    /// The record written beside its levels (JSON).
+    /// The record written beside its levels as [`KEPT_RECORD`] (JSON); its
+    /// digest is the folder's sampling stamp.
     pub record: &'a [u8],
-    pub record_name: &'a str,
 }
 
 /// The first free variant index of the run (one past the last variant
@@ -59,7 +59,7 @@ pub fn write_kept(paths: &RunPaths, config: &Config, kept: &KeptVariant) -> Resu
     };
     let preview = |level: &Level, path: &Path| super::encode::write_preview(level, &crate::render::preview_options(), path);
     dataset::write_variant(&staging, kept.levels, &provenance, Some(&preview), config.output.write_options())?;
-    crate::util::fs::write_file(&staging.join(kept.record_name), kept.record)?;
+    crate::util::fs::write_file(&staging.join(KEPT_RECORD), kept.record)?;
     let digest = format!("kept:{}", crate::util::digest::short(&String::from_utf8_lossy(kept.record)));
     mark_done(&staging, StampOf::Sample, &digest, t.elapsed().as_secs_f64())?;
     crate::util::interrupt::check()?;
@@ -68,13 +68,13 @@ pub fn write_kept(paths: &RunPaths, config: &Config, kept: &KeptVariant) -> Resu
     Ok((name, dir))
 }
 
-/// The kept variant folders (with a [`super::layout::KEPT_RECORD`]) whose
-/// later stages have not run yet (no mesh).
+/// The kept variant folders (with a [`KEPT_RECORD`]) whose later stages
+/// have not run yet (no mesh).
 pub fn unfinished_kept(paths: &RunPaths) -> Vec<usize> {
     (0..next_index(paths))
         .filter(|&i| {
             let d = variant_dir(&paths.variants(), i);
-            d.join(super::layout::KEPT_RECORD).is_file() && !d.join(super::layout::MESH_PLY).is_file()
+            d.join(KEPT_RECORD).is_file() && !d.join(MESH_PLY).is_file()
         })
         .collect()
 }

@@ -431,9 +431,9 @@ pub fn sample_command(dir: &Path, output: &Path, r: &SampleRequest) -> Result<Sa
     // A run folder (what `run` writes) stands for its exemplar/ and models/.
     let run = RunPaths::new(dir);
     let is_run = !dir.join(dataset::MANIFEST).is_file() && run.exemplar().join(dataset::MANIFEST).is_file();
-    let (dir, default_models) = if is_run { (run.exemplar(), run.models()) } else { (dir.to_path_buf(), run.models()) };
-    let dir = dir.as_path();
-    let models = r.models.map_or(default_models, Path::to_path_buf);
+    let exemplar_dir = if is_run { run.exemplar() } else { dir.to_path_buf() };
+    let dir = exemplar_dir.as_path();
+    let models = r.models.map_or_else(|| run.models(), Path::to_path_buf);
     let recorded = models.join(super::layout::CONFIG);
     if !recorded.is_file() {
         return Err(Error::Invalid(format!(

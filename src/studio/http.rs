@@ -65,7 +65,10 @@ pub fn serve(studio: Arc<Studio>, options: ServeOptions) -> Result<Served> {
     let server = Server::http(("127.0.0.1", options.port))
         .map_err(|e| Error::Usage(format!("cannot listen on 127.0.0.1:{}: {e}", options.port)))?;
     let port = server.server_addr().to_ip().map(|a| a.port()).unwrap_or(options.port);
-    let token = options.token.unwrap_or_else(new_token);
+    let token = match options.token {
+        Some(t) => t,
+        None => new_token()?,
+    };
     let server = Arc::new(server);
     let stop = Arc::new(AtomicBool::new(false));
     let handlers = (0..HANDLERS)
@@ -91,13 +94,12 @@ pub fn serve(studio: Arc<Studio>, options: ServeOptions) -> Result<Served> {
     Ok(Served { port, token, server, stop, handlers })
 }
 
-/// 32 hex digits from the operating system's random source.
-pub fn new_token() -> String {
+/// 32 hex digits from the operating system's random source (none, no
+/// studio: a guessable token would open it to any local page).
+pub fn new_token() -> Result<String> {
     let mut b = [0u8; 16];
-    if let Ok(mut f) = std::fs::File::open("/dev/urandom") {
-        let _ = f.read_exact(&mut b);
-    }
-    b.iter().map(|x| format!("{x:02x}")).collect()
+    super::os_random(&mut b).map_err(|e| Error::Invalid(format!("no random source for the studio's token (/dev/urandom): {e}")))?;
+    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
 }
 
 /// An answer: status, content type, body, extra headers.
@@ -314,7 +316,7 @@ mod tests {
 
     #[test]
     fn tokens_are_random_hex_and_compared_whole() {
-        let (a, b) = (new_token(), new_token());
+        let (a, b) = (new_token().unwrap(), new_token().unwrap());
         assert_eq!(a.len(), 32);
         assert!(a.chars().all(|c| c.is_ascii_hexdigit()));
         assert_ne!(a, b);

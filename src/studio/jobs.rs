@@ -20,7 +20,7 @@ use crate::learn::sample::{load_models, Models, SampleOptions};
 use crate::level::Level;
 use crate::pipeline::sample::{models_needed, sample_variants_observed};
 
-use super::shapes::{judge, SeedOf, StudioRecord, STUDIO_RECORD};
+use super::shapes::{judge, SeedOf, StudioRecord, Verdict, NOT_JUDGED};
 use super::Studio;
 
 /// What a job does, with everything it needs taken when it was asked for
@@ -113,12 +113,12 @@ pub struct Jobs {
     changed: Condvar,
     queue: Mutex<Queue>,
     available: Condvar,
-    next: Mutex<usize>,
+    ids: super::Ids,
 }
 
 impl Jobs {
     pub fn new() -> Jobs {
-        Jobs { status: Mutex::new(Vec::new()), changed: Condvar::new(), queue: Mutex::default(), available: Condvar::new(), next: Mutex::new(1) }
+        Jobs { status: Mutex::new(Vec::new()), changed: Condvar::new(), queue: Mutex::default(), available: Condvar::new(), ids: super::Ids::new("j") }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Vec<JobStatus>> {
@@ -141,12 +141,7 @@ impl Jobs {
                 return Ok(id.clone());
             }
         }
-        let id = {
-            let mut n = self.next.lock().unwrap_or_else(|e| e.into_inner());
-            let id = format!("j{n}");
-            *n += 1;
-            id
-        };
+        let id = self.ids.next();
         self.lock().push(JobStatus {
             id: id.clone(),
             kind: work.kind(),
@@ -321,68 +316,65 @@ fn job_outputs(studio: &Studio, id: &str) -> Vec<String> {
     studio.jobs.get(id).map(|j| j.outputs).unwrap_or_default()
 }
 
+/// What a sampling job makes: `n` variants, indices `first..first + n` of
+/// the run seed `seed`, each starting with the levels `given` and sampled
+/// from `from` (the last given level) or from noise.
+struct Plan {
+    first: usize,
+    n: usize,
+    seed: u64,
+    extent: [f32; 3],
+    given: Vec<Level>,
+    made_by: String,
+}
+
 fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, started: Instant) -> Result<String> {
-    match work {
+    let plan = match work {
         Work::Keep { shape } => return keep(studio, id, shape),
         Work::Finish => return finish(studio, id),
-        _ => {}
-    }
+        Work::Sample { n, seed, extent } => {
+            let how = if *extent == [1.0; 3] { String::new() } else { format!(", extent {extent:?}") };
+            Plan { first: 0, n: *n, seed: *seed, extent: *extent, given: Vec::new(), made_by: format!("new variant (seed {seed}{how})") }
+        }
+        Work::MoreLike { source, levels, n, seed } => {
+            let k = levels.last().map_or(0, |l| l.index);
+            let made_by = format!("more like {source} (its levels up to {k}, seed {seed})");
+            Plan { first: 0, n: *n, seed: *seed, extent: [1.0; 3], given: levels.iter().map(|l| (**l).clone()).collect(), made_by }
+        }
+        // From the source's own seed and index: where the level is unedited,
+        // the finer levels are the source's.
+        Work::Regenerate { draft, source, level, seed } => {
+            let s = seed.unwrap_or(SeedOf { seed: studio.config.train.seed, index: 0 });
+            let made_by = format!("edit of {source} at level {} ({draft})", level.index);
+            Plan { first: s.index, n: 1, seed: s.seed, extent: [1.0; 3], given: vec![level.clone()], made_by }
+        }
+    };
     let models = models.ok_or_else(|| {
         let why = studio.load_error.lock().unwrap_or_else(|e| e.into_inner()).clone().unwrap_or_default();
         Error::Invalid(format!("no networks loaded: {why}"))
     })?;
     let finest = studio.exemplar.len() - 1;
-    // (first level index to make, n, seed, extent, level to continue from,
-    //  levels each output starts with, what made it, seed per output)
-    let (start, n, seed, extent, from, given, made_by): (usize, usize, u64, [f32; 3], Option<Level>, Vec<Arc<Level>>, String) = match work {
-        Work::Sample { n, seed, extent } => {
-            let how = if *extent == [1.0; 3] { String::new() } else { format!(", extent {extent:?}") };
-            (0, *n, *seed, *extent, None, Vec::new(), format!("new variant (seed {seed}{how})"))
-        }
-        Work::MoreLike { source, levels, n, seed } => {
-            let last = levels.last().ok_or_else(|| Error::Invalid("nothing to keep".into()))?;
-            let k = last.index;
-            (k + 1, *n, *seed, [1.0; 3], Some((**last).clone()), levels.clone(), format!("more like {source} (its levels up to {k}, seed {seed})"))
-        }
-        Work::Regenerate { draft, source, level, seed } => {
-            let s = seed.unwrap_or(SeedOf { seed: studio.config.train.seed, index: 0 });
-            let made_by = format!("edit of {source} at level {} ({draft})", level.index);
-            return regenerate(studio, models, id, level, s, made_by, started);
-        }
-        Work::Keep { .. } | Work::Finish => unreachable!("handled above"),
-    };
+    let from = plan.given.last().cloned();
+    let start = from.as_ref().map_or(0, |l| l.index + 1);
     if start > finest {
         return Err(Error::Invalid(format!("nothing finer to make: the finest level is {finest}")));
     }
-    let ids: Vec<String> = (0..n)
-        .map(|i| studio.gallery.add_session(made_by.clone(), Some(SeedOf { seed, index: i }), given.iter().map(|l| (**l).clone()).collect()))
+    let indices = plan.first..plan.first + plan.n;
+    let ids: Vec<String> = indices
+        .clone()
+        .map(|index| studio.gallery.add_session(plan.made_by.clone(), Some(SeedOf { seed: plan.seed, index }), plan.given.clone()))
         .collect();
     studio.jobs.update(id, |j| j.outputs = ids.clone());
-    let total = (n * (finest + 1 - start)) as f64;
-    for (i, shape) in ids.iter().enumerate() {
+    let per_variant = finest + 1 - start;
+    let total = (plan.n * per_variant) as f64;
+    for (k, (index, shape)) in indices.zip(&ids).enumerate() {
         crate::util::interrupt::check()?;
-        let opts = SampleOptions { first: i, extent, ..SampleOptions::from_config(&studio.config, 1, seed) };
-        let done_before = i * (finest + 1 - start);
-        let sink = |_: usize, level: &Level| studio.level_made(id, shape, level, started, done_before, total);
+        let opts = SampleOptions { first: index, extent: plan.extent, ..SampleOptions::from_config(&studio.config, 1, plan.seed) };
+        let sink = |_: usize, level: &Level| studio.level_made(id, shape, level, started, k * per_variant, total);
         sample_variants_observed(models, &studio.exemplar, &opts, from.clone(), Some(&sink))?;
         studio.judge_shape(shape);
     }
-    Ok(format!("{n} variant{} made", if n == 1 { "" } else { "s" }))
-}
-
-fn regenerate(studio: &Studio, models: &Models, id: &str, level: &Level, seed: SeedOf, made_by: String, started: Instant) -> Result<String> {
-    let finest = studio.exemplar.len() - 1;
-    if level.index >= finest {
-        return Err(Error::Invalid(format!("the edit is at the finest level ({}): nothing finer to regenerate", level.index)));
-    }
-    let shape = studio.gallery.add_session(made_by, Some(seed), vec![level.clone()]);
-    studio.jobs.update(id, |j| j.outputs = vec![shape.clone()]);
-    let total = (finest - level.index) as f64;
-    let opts = SampleOptions { first: seed.index, ..SampleOptions::from_config(&studio.config, 1, seed.seed) };
-    let sink = |_: usize, l: &Level| studio.level_made(id, &shape, l, started, 0, total);
-    sample_variants_observed(models, &studio.exemplar, &opts, Some(level.clone()), Some(&sink))?;
-    studio.judge_shape(&shape);
-    Ok(format!("levels {}..{finest} regenerated", level.index + 1))
+    Ok(format!("{} made (levels {start}..{finest})", if plan.n == 1 { "1 variant".into() } else { format!("{} variants", plan.n) }))
 }
 
 fn keep(studio: &Studio, id: &str, shape: &str) -> Result<String> {
@@ -401,7 +393,6 @@ fn keep(studio: &Studio, id: &str, shape: &str) -> Result<String> {
         levels: &levels,
         seed: seed.map(|s| s.seed),
         record: &record,
-        record_name: STUDIO_RECORD,
     };
     let (name, dir) = crate::pipeline::keep::write_kept(&studio.paths, &studio.config, &kept)?;
     studio.gallery.add_run_variant(name.clone(), dir.clone(), None);
@@ -458,7 +449,10 @@ impl Studio {
     /// The structure judge's verdict on a finished session variant.
     fn judge_shape(&self, shape: &str) {
         let levels: Vec<Arc<Level>> = self.gallery.with(shape, |s| Ok(s.levels.values().cloned().collect())).unwrap_or_default();
-        let verdict = judge(&self.exemplar, &levels).unwrap_or_default();
+        let verdict = judge(&self.exemplar, self.exemplar_structure.as_ref(), &levels).unwrap_or_else(|| Verdict {
+            by: NOT_JUDGED.into(),
+            ..Verdict::default()
+        });
         let _ = self.gallery.with(shape, |s| {
             s.verdict = Some(verdict);
             Ok(())

@@ -40,7 +40,7 @@ use crate::pipeline::layout::{RunPaths, CONFIG};
 
 pub use drafts::{Clipboard, Draft, DraftSummary, EditRequest};
 pub use jobs::{JobState, JobStatus, Jobs, Work};
-pub use shapes::{Gallery, ShapeSummary, Verdict, STUDIO_RECORD};
+pub use shapes::{Gallery, ShapeSummary, Verdict};
 
 /// Most variants one job may ask for (each is a full coarse-to-fine pass).
 pub const MAX_VARIANTS_PER_JOB: usize = 16;
@@ -67,12 +67,14 @@ pub struct Studio {
     pub config: Config,
     pub exemplar: Vec<Level>,
     pub exemplar_name: String,
+    /// The exemplar's structure level and its structure, for the verdicts.
+    pub exemplar_structure: Option<(usize, crate::level::structure::Structure)>,
     pub device: tch::Device,
     /// Whether the networks multiply in bf16 (see [`Precision`]).
     pub bf16: bool,
     pub gallery: Gallery,
     drafts: Mutex<Vec<Draft>>,
-    next_draft: Mutex<usize>,
+    draft_ids: Ids,
     clipboard: Mutex<Option<Clipboard>>,
     pub jobs: Jobs,
     /// Set once the worker has loaded the networks (or failed to).
@@ -106,7 +108,6 @@ pub struct StudioState {
     pub network_levels: usize,
     /// The structure level's index (where the judge looks).
     pub structure_level: Option<usize>,
-    pub level0_box_budget: f64,
     /// The exemplar's frame: normalised = (world - centre) * scale (a
     /// mesh, in world units, is placed with it); `up` the vertical axis.
     pub frame_centre: [f64; 3],
@@ -143,6 +144,7 @@ impl Studio {
         let studio = Studio {
             paths,
             config,
+            exemplar_structure: shapes::exemplar_structure(&exemplar),
             exemplar,
             exemplar_name: manifest.exemplar,
             device,
@@ -153,7 +155,7 @@ impl Studio {
             },
             gallery,
             drafts: Mutex::new(Vec::new()),
-            next_draft: Mutex::new(1),
+            draft_ids: Ids::new("d"),
             clipboard: Mutex::new(None),
             jobs,
             ready: AtomicBool::new(false),
@@ -182,8 +184,7 @@ impl Studio {
             exemplar: self.exemplar_name.clone(),
             resolutions: self.exemplar.iter().map(|l| l.resolution).collect(),
             network_levels: crate::pipeline::sample::trained_levels(&self.config, &self.exemplar),
-            structure_level: crate::level::structure::structure_level(&self.exemplar).map(|l| l.index),
-            level0_box_budget: crate::learn::sample::MAX_LEVEL0_BOX_CUBES,
+            structure_level: self.exemplar_structure.as_ref().map(|(k, _)| *k),
             frame_centre: self.exemplar[0].frame.centre.to_array(),
             frame_scale: self.exemplar[0].frame.scale,
             up: if self.exemplar[0].frame.up == crate::level::Up::Z { "z" } else { "y" },
@@ -209,13 +210,7 @@ impl Studio {
         }
         let l = self.gallery.level(source, level)?;
         let seed = self.gallery.with(source, |s| Ok(s.seed))?;
-        let id = {
-            let mut n = self.next_draft.lock().unwrap_or_else(|e| e.into_inner());
-            let id = format!("d{n}");
-            *n += 1;
-            id
-        };
-        let draft = Draft::new(id, source.to_string(), seed, (*l).clone());
+        let draft = Draft::new(self.draft_ids.next(), source.to_string(), seed, (*l).clone());
         let summary = draft.summary();
         self.lock_drafts().push(draft);
         Ok(summary)
@@ -322,16 +317,37 @@ fn read_json(path: &Path) -> Option<serde_json::Value> {
     serde_json::from_slice(&std::fs::read(path).ok()?).ok()
 }
 
-/// A seed from the operating system's random source (a new variant's).
+/// `buf` filled from the operating system's random source.
+pub fn os_random(buf: &mut [u8]) -> std::io::Result<()> {
+    use std::io::Read;
+    std::fs::File::open("/dev/urandom")?.read_exact(buf)
+}
+
+/// A seed for new variants: random, short enough to type back into the page;
+/// from the clock where the system has no random source (a seed need not be
+/// secret).
 pub fn random_seed() -> u64 {
     let mut b = [0u8; 8];
-    if let Ok(mut f) = std::fs::File::open("/dev/urandom") {
-        use std::io::Read;
-        if f.read_exact(&mut b).is_ok() {
-            return u64::from_le_bytes(b) % 1_000_000_007;
-        }
+    let raw = match os_random(&mut b) {
+        Ok(()) => u64::from_le_bytes(b),
+        Err(_) => std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64),
+    };
+    raw % 1_000_000_007
+}
+
+/// Ids of one kind (`s1`, `s2`, ... for session variants, `d` drafts, `j` jobs).
+pub struct Ids {
+    prefix: &'static str,
+    next: std::sync::atomic::AtomicUsize,
+}
+
+impl Ids {
+    pub const fn new(prefix: &'static str) -> Ids {
+        Ids { prefix, next: std::sync::atomic::AtomicUsize::new(1) }
     }
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64) % 1_000_000_007
+    pub fn next(&self) -> String {
+        format!("{}{}", self.prefix, self.next.fetch_add(1, std::sync::atomic::Ordering::SeqCst))
+    }
 }
 
 /// What `shapeshifter studio` is asked.

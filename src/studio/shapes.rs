@@ -117,12 +117,9 @@ impl Shape {
     }
 }
 
-/// The record a variant kept from the studio carries beside its levels: what
-/// made it, so a later `run` leaves it as it is and the studio can continue
-/// it with its own seed.
-pub const STUDIO_RECORD: &str = crate::pipeline::layout::KEPT_RECORD;
-
-/// What [`STUDIO_RECORD`] holds.
+/// What a variant kept from the studio records beside its levels
+/// ([`crate::pipeline::layout::KEPT_RECORD`]): what made it, so the studio
+/// can continue it with its own seed.
 #[derive(Clone, Debug, Serialize, serde::Deserialize)]
 pub struct StudioRecord {
     pub made_by: String,
@@ -136,7 +133,7 @@ pub struct StudioRecord {
 /// the session's.
 pub struct Gallery {
     pub shapes: Mutex<Vec<Shape>>,
-    next_session: Mutex<usize>,
+    session_ids: super::Ids,
 }
 
 impl Gallery {
@@ -155,15 +152,7 @@ impl Gallery {
             preview: None,
         }];
         shapes.extend(run_variants(variants_dir)?.into_iter().map(|(name, folder)| run_shape(name, folder, eval)));
-        Ok(Gallery { shapes: Mutex::new(shapes), next_session: Mutex::new(1) })
-    }
-
-    /// A new session shape's id (`s1`, `s2`, ...).
-    pub fn new_session_id(&self) -> String {
-        let mut n = self.next_session.lock().unwrap_or_else(|e| e.into_inner());
-        let id = format!("s{n}");
-        *n += 1;
-        id
+        Ok(Gallery { shapes: Mutex::new(shapes), session_ids: super::Ids::new("s") })
     }
 
     pub fn summaries(&self) -> Vec<ShapeSummary> {
@@ -184,21 +173,19 @@ impl Gallery {
 
     /// Level `k` of shape `id`, read from its folder the first time.
     pub fn level(&self, id: &str, k: usize) -> Result<Arc<Level>> {
-        let folder = self.with(id, |s| {
-            if let Some(l) = s.levels.get(&k) {
-                return Ok(Err(l.clone()));
-            }
+        let (held, folder) = self.with(id, |s| {
             if !s.present.contains(&k) {
                 return Err(Error::Invalid(format!("{id} has no level {k} (it has {:?})", s.present)));
             }
-            Ok(Ok(s.folder().map(Path::to_path_buf)))
+            Ok((s.levels.get(&k).cloned(), s.folder().map(Path::to_path_buf)))
         })?;
-        let folder = match folder {
-            Err(level) => return Ok(level),
-            Ok(Some(f)) => f,
-            Ok(None) => return Err(Error::Invalid(format!("{id}: level {k} is not made yet"))),
-        };
-        // Read outside the lock: a 256^3 level takes a while.
+        if let Some(level) = held {
+            return Ok(level);
+        }
+        // A present level not in memory is a run variant's file (a session
+        // variant's levels are all in memory). Read outside the lock: a
+        // 256^3 level takes a while.
+        let folder = folder.ok_or_else(|| Error::Invalid(format!("{id}: level {k} is not in memory")))?;
         let (level, _) = crate::io::vdb::read_level(&folder.join(dataset::level_file_name(k)))?;
         let level = Arc::new(level);
         self.with(id, |s| {
@@ -210,7 +197,7 @@ impl Gallery {
 
     /// Adds a session shape; returns its id.
     pub fn add_session(&self, made_by: String, seed: Option<SeedOf>, levels: Vec<Level>) -> String {
-        let id = self.new_session_id();
+        let id = self.session_ids.next();
         let mut shapes = self.lock();
         shapes.push(Shape {
             id: id.clone(),
@@ -288,7 +275,7 @@ pub fn run_variants(variants_dir: &Path) -> Result<Vec<(String, PathBuf)>> {
 fn run_shape(name: String, folder: PathBuf, eval: Option<&serde_json::Value>) -> Shape {
     let present: Vec<usize> = crate::eval::evaluate::level_files(&folder).map(|f| f.into_iter().map(|(k, _)| k).collect()).unwrap_or_default();
     let record: Option<StudioRecord> =
-        std::fs::read(folder.join(STUDIO_RECORD)).ok().and_then(|b| serde_json::from_slice(&b).ok());
+        std::fs::read(folder.join(crate::pipeline::layout::KEPT_RECORD)).ok().and_then(|b| serde_json::from_slice(&b).ok());
     let seed = match record {
         Some(r) => r.seed,
         None => {
@@ -326,16 +313,29 @@ fn eval_verdict(eval: &serde_json::Value, name: &str) -> Option<Verdict> {
     Some(Verdict { whole: !broken, near_copy: flags.iter().any(|f| f == Flag::NearCopy.name()), flags, by: "eval.json".into() })
 }
 
+/// The verdict's `by` where there is nothing to judge: the exemplar has no
+/// level at the structure resolution, or the variant lacks it (an edit of a
+/// finer level).
+pub const NOT_JUDGED: &str = "not judged (no level at the structure resolution)";
+
+/// The exemplar's structure level and its structure, which every verdict
+/// compares with (measured once per studio: a tenth of a second at 64^3).
+pub fn exemplar_structure(exemplar: &[Level]) -> Option<(usize, Structure)> {
+    structure_level(exemplar).map(|l| (l.index, Structure::of(l)))
+}
+
 /// The structure judge on a session variant: its structure level (and its
-/// fine level) against the exemplar's, as the attempts and eval judge.
-pub fn judge(exemplar: &[Level], levels: &[Arc<Level>]) -> Option<Verdict> {
-    let ex = structure_level(exemplar)?;
+/// fine level) against the exemplar's (`reference`, [`exemplar_structure`]),
+/// as the attempts and eval judge.
+pub fn judge(exemplar: &[Level], reference: Option<&(usize, Structure)>, levels: &[Arc<Level>]) -> Option<Verdict> {
+    let (index, ex_structure) = reference?;
+    let ex = &exemplar[*index];
     let shape = levels.iter().find(|l| l.index == ex.index && l.resolution == ex.resolution)?;
     if shape.is_empty() {
         return Some(Verdict { flags: vec![Flag::Fragment.name().into()], whole: false, near_copy: false, by: "structure level".into() });
     }
     let params = StructureParams::default();
-    let mut scores = StructureScores::new(shape, &Structure::of(shape), ex, &Structure::of(ex), &params);
+    let mut scores = StructureScores::new(shape, &Structure::of(shape), ex, ex_structure, &params);
     let ex_fine = crate::level::structure::fine_level(exemplar);
     if let Some((fine, ex_fine)) = ex_fine.and_then(|f| Some((levels.iter().find(|l| l.index == f.index)?, f))) {
         scores = scores.with_fine(fine, ex_fine, &params);

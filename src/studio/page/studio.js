@@ -394,6 +394,7 @@ function flagsHtml(s) {
   const v = s.verdict;
   if (s.id === 'exemplar') return '<span class="flag info">exemplar</span>';
   if (!v) return s.levels.length ? '<span class="flag info">judging…</span>' : '<span class="flag info">in progress</span>';
+  if (v.by.startsWith('not judged')) return '<span class="flag info">not judged</span>';
   const out = [];
   out.push(v.whole ? '<span class="flag whole">whole</span>' : '<span class="flag">broken</span>');
   if (v.near_copy) out.push('<span class="flag copy">near copy</span>');
@@ -401,7 +402,6 @@ function flagsHtml(s) {
   return out.join('');
 }
 
-const previewStamp = {};
 function renderGallery() {
   const g = $('gallery');
   const cards = [];
@@ -413,7 +413,6 @@ function renderGallery() {
     cards.push(`<div class="card${s.id === S.selected || (S.draft && S.selected === S.draft.id && s.id === S.draft.source) ? ' selected' : ''}" data-id="${s.id}">
       ${img}<div class="name">${s.id}${s.kept_as ? ` → ${s.kept_as}` : ''}</div>
       <div class="origin">${origin}</div><div>${flagsHtml(s)}</div></div>`);
-    previewStamp[s.id] = key;
   }
   const html = cards.join('');
   if (g.dataset.html !== html) {
