@@ -369,6 +369,18 @@ pub struct SampleConfig {
     /// Not written when `figures`.
     #[serde(default, skip_serializing_if = "BendExemplars::is_figures")]
     pub bend_exemplars: BendExemplars,
+    /// With `level0_pick = novel`, `level0_candidates` > 1 and the
+    /// exemplar's box: where none of a pass's level-0 candidates is new
+    /// enough and the exemplar is not bent (a building, a part, a terrain),
+    /// the pass starts instead from a level-0 box resized along one
+    /// horizontal axis by a factor in [1.25, `resize_max`] (the paper's
+    /// resize, `level::resize`): the networks fill a longer box in their own
+    /// way (a house with more windows), where in the exemplar's box they
+    /// draw the exemplar again. The variant records its extent
+    /// (`extent.json`) and is judged against the exemplar at that extent.
+    /// 0: never. Not written when 0.
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub resize_max: f64,
 }
 
 /// Which exemplars sampling may bend (`sample.bend_exemplars`).
@@ -501,7 +513,7 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 12] = [
+        let defaults: [(&str, &str, toml::Value); 13] = [
             ("sample", "final_step", toml::Value::String("prediction".into())),
             ("sample", "level0_pick", toml::Value::String("first".into())),
             ("sample", "level0_sampler", toml::Value::String("same".into())),
@@ -513,6 +525,7 @@ impl Config {
             ("sample", "remove_specks", toml::Value::Boolean(false)),
             ("sample", "bend_voxels", toml::Value::Float(0.0)),
             ("sample", "bend_exemplars", toml::Value::String("figures".into())),
+            ("sample", "resize_max", toml::Value::Float(0.0)),
             ("train", "bf16", toml::Value::Boolean(false)),
         ];
         for (section, key, value) in defaults {
@@ -661,6 +674,13 @@ impl Config {
             return Err(Error::Invalid(format!(
                 "sample.bend_voxels must be in [0, {}] (level-0 voxels)",
                 crate::level::warp::MAX_BEND_VOXELS
+            )));
+        }
+        let r = self.sample.resize_max;
+        if !(r == 0.0 || (crate::level::resize::RESIZE_MIN_SCALE..=4.0).contains(&r)) {
+            return Err(Error::Invalid(format!(
+                "sample.resize_max must be 0 (never resize) or in [{}, 4]",
+                crate::level::resize::RESIZE_MIN_SCALE
             )));
         }
         if !(0.0..=1.0).contains(&self.sample.level0_min_structure) {
@@ -838,6 +858,7 @@ mod tests {
             "sample.mend_sheets=false",
             "sample.remove_specks=false",
             "sample.bend_voxels=0",
+            "sample.resize_max=0",
             "sample.level0_pick=first",
             "sample.level0_sampler=same",
             "sample.level0_steps=50",

@@ -43,6 +43,9 @@ pub struct VariantFiles {
     /// The bend of its start, where it started from the exemplar bent
     /// ([`crate::level::warp::BEND_FILE`]).
     pub bend: Option<crate::level::warp::Bend>,
+    /// The extent of its level-0 box, where it is not the exemplar's
+    /// ([`crate::level::resize::EXTENT_FILE`]).
+    pub extent: Option<crate::level::resize::Extent>,
 }
 
 pub use crate::level::structure::STRUCTURE_RESOLUTION;
@@ -93,7 +96,25 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let mesh = if mesh_path.is_file() { Some(mesh::load(&mesh_path)?) } else { None };
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let bend = read_bend(dir)?;
-    Ok(VariantFiles { name, finest, coarsest, structure, fine, mesh, bend })
+    let extent = read_extent(dir)?;
+    Ok(VariantFiles { name, finest, coarsest, structure, fine, mesh, bend, extent })
+}
+
+/// A variant folder's extent record ([`crate::level::resize::EXTENT_FILE`]),
+/// if there is one; a record that is not one, or an extent that is not
+/// positive and finite, is an error naming the file.
+pub fn read_extent(dir: &Path) -> Result<Option<crate::level::resize::Extent>> {
+    let path = dir.join(crate::level::resize::EXTENT_FILE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
+    let extent: crate::level::resize::Extent = serde_json::from_str(&text)
+        .map_err(|e| Error::file(&path, format!("not an extent record: {}", crate::error::one_line(&e.to_string()))))?;
+    if extent.extent.iter().any(|e| !(e.is_finite() && *e > 0.0)) {
+        return Err(Error::file(&path, format!("extent {:?}: each scale must be a positive number", extent.extent)));
+    }
+    Ok(Some(extent).filter(|e| !e.is_same()))
 }
 
 /// A variant folder's bend record ([`crate::level::warp::BEND_FILE`]), if
@@ -277,6 +298,14 @@ pub fn evaluate(
     // The exemplar's structure level bent as each bent variant's start was.
     let bent: Vec<Option<Level>> =
         variants.iter().map(|v| v.bend.zip(ex_structure).map(|(b, l)| b.bent(&levels, l.index))).collect();
+    // And at the extent of each resized variant's box.
+    let at_extent: Vec<Option<([f32; 3], Level)>> = variants
+        .iter()
+        .map(|v| match (v.extent, ex_structure) {
+            (Some(e), Some(l)) if v.bend.is_none() => e.of(&levels, l.index).map(|at| Some((e.extent, at))),
+            _ => Ok(None),
+        })
+        .collect::<Result<_>>()?;
     // And its fine level, to compare each variant's with (bent likewise).
     let ex_fine_level = crate::level::structure::fine_level(&levels);
     let fine_references: Vec<Option<std::borrow::Cow<Level>>> = variants
@@ -297,6 +326,7 @@ pub fn evaluate(
         coarse_points: Some(&ex_coarse_pts),
         structure_level: ex_structure,
         bent_reference: None,
+        at_extent: None,
         fine_level: None,
     };
     let inputs: Vec<ShapeInput> = variants
@@ -305,7 +335,8 @@ pub fn evaluate(
         .zip(&coarse)
         .zip(&bent)
         .zip(&fine_references)
-        .map(|((((v, occ), c), b), fr)| ShapeInput {
+        .zip(&at_extent)
+        .map(|(((((v, occ), c), b), fr), ae)| ShapeInput {
             name: v.name.clone(),
             occupancy: &occ[0],
             occupancy_22: &occ[1],
@@ -313,6 +344,7 @@ pub fn evaluate(
             coarse_points: Some(c),
             structure_level: v.structure.as_ref(),
             bent_reference: b.as_ref(),
+            at_extent: ae.as_ref().map(|(e, l)| (*e, l)),
             fine_level: v.fine.as_ref().zip(fr.as_deref()),
         })
         .collect();

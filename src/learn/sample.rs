@@ -64,6 +64,7 @@ use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Ups
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
 use crate::level::figure::{FigureReading, MAX_UPRIGHT_SHARE, MIN_NORMAL_SPREAD, MIN_READING_RESOLUTION};
+use crate::level::resize::Extent;
 use crate::level::warp::Bend;
 use crate::util::seed::{derive_seed, Stream};
 
@@ -212,6 +213,12 @@ pub struct SampleOptions {
     /// `figures`, the default.
     #[serde(default, skip_serializing_if = "BendExemplars::is_figures")]
     pub bend_exemplars: BendExemplars,
+    /// A pass whose level-0 candidates are none new enough, where the
+    /// exemplar is not bent, starts instead from a level-0 box resized along
+    /// one horizontal axis by up to this factor (`sample.resize_max`,
+    /// [`crate::level::resize::Extent::drawn`]; 0: never). Not written when 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub resize_max: f64,
 }
 
 impl SampleOptions {
@@ -238,59 +245,28 @@ impl SampleOptions {
             remove_specks: config.sample.remove_specks,
             bend_voxels: config.sample.bend_voxels,
             bend_exemplars: config.sample.bend_exemplars,
+            resize_max: config.sample.resize_max,
         }
     }
 }
 
-/// The largest level-0 box sampling starts from, in multiples of the
-/// level-0 grid's full cube (16^3 voxels at the shipped profiles: at most
-/// 262,144 voxels). Sampling fills the level-0 box densely with noise, and
-/// every finer level grows with it, so the box is bounded before anything
-/// is allocated: `--extent 4,4,4` or `16,4,1` fit, `1000,1000,1000` does not.
-pub const MAX_LEVEL0_BOX_CUBES: f64 = 64.0;
-
-/// The level-0 box of the exemplar resized by `extent` around its centre:
-/// `(min, size)` in voxels. An extent that is not positive, or whose box
-/// exceeds [`MAX_LEVEL0_BOX_CUBES`], is a usage error.
-pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
-    if level0.is_empty() {
-        return Err(Error::Invalid("the exemplar's level 0 has no voxels".into()));
-    }
-    let shown = extent.map(|e| e.to_string()).join(",");
-    if extent.iter().any(|e| !(e.is_finite() && *e > 0.0)) {
-        return Err(Error::Usage(format!("--extent {shown}: each scale must be a positive number")));
-    }
-    let lo = level0.coords.iter().fold(IVec3::MAX, |a, &c| a.min(c));
-    let hi = level0.coords.iter().fold(IVec3::MIN, |a, &c| a.max(c));
-    let size = hi - lo + IVec3::ONE;
-    // In f64 first: a huge extent must not overflow the i32 voxel counts.
-    let sizes = [0, 1, 2].map(|a| (size[a] as f64 * extent[a] as f64).round().max(1.0));
-    let voxels = sizes[0] * sizes[1] * sizes[2];
-    let budget = MAX_LEVEL0_BOX_CUBES * (level0.resolution as f64).powi(3);
-    if voxels > budget {
-        return Err(Error::Usage(format!(
-            "--extent {shown}: the level-0 box would be {}x{}x{} = {voxels:.3e} voxels, more than the {budget:.0} \
-             ({MAX_LEVEL0_BOX_CUBES} level-0 grids of {r}^3) sampling allows; every finer level grows by the same factor",
-            sizes[0], sizes[1], sizes[2], r = level0.resolution
-        )));
-    }
-    let new_size = IVec3::from_array(sizes.map(|v| v as i32));
-    // keep the centre: shift by half the change (floor division keeps it exact for even changes)
-    let new_lo = lo + IVec3::from_array([0, 1, 2].map(|a| (size[a] - new_size[a]).div_euclid(2)));
-    Ok((new_lo, new_size))
-}
+pub use crate::level::resize::{level0_box, MAX_LEVEL0_BOX_CUBES};
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
 }
 
 /// One sampled variant: the pruned level of each stage produced, coarsest
-/// first, and the bend its start was bent by, where it started from the
-/// exemplar bent (`sample.bend_voxels`).
+/// first, the bend its start was bent by, where it started from the
+/// exemplar bent (`sample.bend_voxels`), and its extent, where its box was
+/// resized.
 #[derive(Clone, Debug)]
 pub struct SampledVariant {
     pub levels: Vec<Level>,
     pub bend: Option<Bend>,
+    /// The extent of its level-0 box against the exemplar's, where it is not
+    /// the exemplar's (`--extent`, or a resized pass).
+    pub extent: Option<Extent>,
 }
 
 /// Samples `opts.n` variants. `exemplar_levels` gives the level-0 box and the frame.
@@ -345,39 +321,37 @@ pub fn sample_observed(
             }
         }
     }
-    let box0 = level0_box(exemplar0, opts.extent)?;
     let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
-    // The exemplar's structure level judges attempts and its level 1 the
-    // level-0 candidates, which a continuation from a level has none of: not
-    // measured then (a tenth of a second of the studio's regeneration).
     let continuing = from.is_some();
-    let mut exemplar0_structure = Structure::of(exemplar0);
-    // Whether level 0 is a sheet (the `holed` term of the level-0 choice) is
-    // the structure level's decision, not 16^3's own.
-    exemplar0_structure.sheet_axis = sheet_axes[0];
-    let reference =
-        crate::level::structure::structure_level(exemplar_levels).filter(|_| !continuing).map(|l| (l, Structure::of(l)));
-    // Also when sampling stops at level 0 (see `Models::upsamplers`).
-    let exemplar1 = ThinAtLevel1::of(exemplar_levels, &structure_params(opts)).filter(|_| !continuing);
+    let at_extent = AtExtent::of(exemplar_levels, Extent { extent: opts.extent }, sheet_axes[0], continuing)?;
+    // Out-of-style patches are the exemplar's own at any extent.
+    let style = if continuing || at_extent.extent.is_same() {
+        None
+    } else {
+        crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)))
+    };
+    let copies_only = std::cell::Cell::new(false);
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
     let bending = Bending::of(opts, exemplar_levels, from.is_some());
+    let resizing = opts.resize_max > 0.0 && could_bend(opts) && !continuing && !matches!(bending, Bending::Bends(_));
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
+                copies_only.set(false);
                 let job = OneVariant {
                     models,
                     exemplar_levels,
                     frame,
                     last,
-                    box0,
                     sampler: opts.sampler,
                     schedule: Schedule::default(),
                     seed: variant_seed(opts.seed, i),
-                    exemplar0: (exemplar0, &exemplar0_structure),
-                    structure_reference: reference.as_ref().map(|(l, s)| (*l, s)),
-                    exemplar1,
+                    at: &at_extent,
+                    style: style.as_ref().map(|(l, s)| (*l, s)),
                     repairs: &repairs,
                     bending,
+                    copies_only: &copies_only,
+                    resizing,
                     told: sink.map(|f| (i, f)),
                 };
                 job.run(exemplar0.resolution, opts, from.as_ref())
@@ -409,22 +383,26 @@ struct OneVariant<'a> {
     exemplar_levels: &'a [Level],
     frame: crate::level::Frame,
     last: usize,
-    box0: (IVec3, IVec3),
     sampler: Sampler,
     schedule: Schedule,
     seed: u64,
-    /// The exemplar's level 0 and its structure (the level-0 rejection).
-    exemplar0: (&'a Level, &'a Structure),
-    /// The exemplar's structure level and its structure (the attempts).
-    structure_reference: Option<(&'a Level, &'a Structure)>,
-    /// The exemplar's level 1 and its thin-part voxel count: a level-0
-    /// candidate's thin parts are counted a level finer ([`ThinAtLevel1`]).
-    exemplar1: Option<ThinAtLevel1<'a>>,
+    /// The exemplar at the pass's extent: the level-0 box, and what the
+    /// level-0 candidates and the attempts are judged against.
+    at: &'a AtExtent,
+    /// The exemplar's own structure level, where `at` is resized: the
+    /// out-of-style patches are judged against it.
+    style: Option<(&'a Level, &'a Structure)>,
     /// Per level, what it gets once made ([`crate::level::repair::repairs`];
     /// empty: nothing).
     repairs: &'a [LevelRepair],
     /// Whether a pass with nothing new at level 0 is the exemplar bent.
     bending: Bending,
+    /// Set once a pass of this variant found its level-0 candidates none new
+    /// enough and resized: its later attempts start resized at once.
+    copies_only: &'a std::cell::Cell<bool>,
+    /// Whether a pass whose level-0 candidates are none new enough is
+    /// resized (`resize_max`, not bent, the novel pick in the exemplar's box).
+    resizing: bool,
     /// Who is told of each level of the variant as it is made, with the
     /// variant's index.
     told: Option<(usize, LevelSink<'a>)>,
@@ -473,52 +451,87 @@ impl Bending {
     }
 }
 
-/// The thin-part check of a level-0 candidate one level finer. At 16^3 a
-/// bunny's body is itself "thin" (3 voxels deep; 83 of its 299 voxels), so
-/// an ear gone is 10% of the thin voxels, as much as a ruined wall top of
-/// the demo tower, and the rim of the hole it leaves adds thin voxels back
-/// (thin ratio 0.81-0.96 with the ear gone). At 32^3 the body is not thin
-/// and the ear is: ratio 0.58-0.72 with the ear gone, 0.9 with it, 0.83 or
-/// more for the demo's and the tower's ruins (docs/results.md, "Thin parts
-/// at level 0"). The candidate is taken there by the level-1 upsampler
-/// alone (no diffusion steps: a fraction of a second).
-#[derive(Clone, Copy)]
-struct ThinAtLevel1<'a> {
-    level: &'a Level,
-    thin: usize,
+/// The exemplar as sampling judges a pass at one extent
+/// ([`crate::level::resize`]): its level-0 box; its level 0 and structure
+/// (the level-0 gate); its level 1's thin parts (the level-0 candidates'
+/// thin parts are counted a level finer, see [`AtExtent::thin_ratio`]); its
+/// structure level and structure (the attempts). The exemplar's own at its
+/// own extent, else stretched to the extent.
+struct AtExtent {
+    extent: Extent,
+    box0: (IVec3, IVec3),
+    level0: Level,
+    structure0: Structure,
+    /// Level 1 and its thin-part voxel count, where it has thin parts
+    /// enough to lose ([`StructureParams::min_exemplar_thin_share`]).
+    thin1: Option<(Level, usize)>,
+    reference: Option<(Level, Structure)>,
 }
 
-impl ThinAtLevel1<'_> {
-    /// The exemplar's level 1 where it has thin parts enough to lose (the
-    /// share [`StructureParams::min_exemplar_thin_share`]).
-    fn of<'a>(exemplar_levels: &'a [Level], params: &StructureParams) -> Option<ThinAtLevel1<'a>> {
-        let level = exemplar_levels.get(1)?;
-        let thin = thin_count(level);
-        let surface = level.mask.iter().filter(|&&m| m > 0.0).count();
-        (thin > 0 && thin as f64 >= params.min_exemplar_thin_share * surface as f64).then_some(ThinAtLevel1 { level, thin })
+impl AtExtent {
+    /// `sheet_axis0`: whether level 0 is a sheet (the `holed` term of the
+    /// level-0 gate) is the structure level's decision, not 16^3's own. A
+    /// continuation from a level has no level-0 gate nor attempts: level 1
+    /// and the structure level are not measured then (a tenth of a second
+    /// of the studio's regeneration).
+    fn of(levels: &[Level], extent: Extent, sheet_axis0: Option<usize>, continuing: bool) -> Result<AtExtent> {
+        let level0 = levels.first().ok_or_else(|| Error::Invalid("no exemplar levels".into()))?;
+        let box0 = level0_box(level0, extent.extent)?;
+        let level0 = extent.of(levels, 0)?;
+        let mut structure0 = Structure::of(&level0);
+        structure0.sheet_axis = sheet_axis0;
+        if continuing {
+            return Ok(AtExtent { extent, box0, level0, structure0, thin1: None, reference: None });
+        }
+        // Also when sampling stops at level 0 (see `Models::upsamplers`).
+        let thin1 = match levels.get(1) {
+            Some(_) => {
+                let level = extent.of(levels, 1)?;
+                let thin = thin_count(&level);
+                let surface = level.mask.iter().filter(|&&m| m > 0.0).count();
+                let enough = thin > 0 && thin as f64 >= StructureParams::default().min_exemplar_thin_share * surface as f64;
+                enough.then_some((level, thin))
+            }
+            None => None,
+        };
+        let reference = match crate::level::structure::structure_level(levels) {
+            Some(l) => {
+                let level = extent.of(levels, l.index)?;
+                let structure = Structure::of(&level);
+                Some((level, structure))
+            }
+            None => None,
+        };
+        Ok(AtExtent { extent, box0, level0, structure0, thin1, reference })
     }
 
-    /// Thin-part voxels of `level1` (a candidate taken to level 1) over the
-    /// exemplar's.
-    fn ratio(&self, level1: &Level) -> f64 {
-        debug_assert_eq!(level1.resolution, self.level.resolution);
-        thin_count(level1) as f64 / self.thin as f64
+    /// The thin-part check of a level-0 candidate one level finer: its
+    /// thin-part voxels taken to level 1 over the exemplar's. At 16^3 a
+    /// bunny's body is itself "thin" (3 voxels deep; 83 of its 299 voxels),
+    /// so an ear gone is 10% of the thin voxels, as much as a ruined wall
+    /// top of the demo tower, and the rim of the hole it leaves adds thin
+    /// voxels back (thin ratio 0.81-0.96 with the ear gone). At 32^3 the
+    /// body is not thin and the ear is: ratio 0.58-0.72 with the ear gone,
+    /// 0.9 with it, 0.83 or more for the demo's and the tower's ruins. The
+    /// candidate is taken there by the level-1 upsampler alone (no
+    /// diffusion steps: a fraction of a second).
+    fn thin_ratio(&self, level1: &Level) -> Option<f64> {
+        let (ex, thin) = self.thin1.as_ref()?;
+        debug_assert_eq!(level1.resolution, ex.resolution);
+        Some(thin_count(level1) as f64 / *thin as f64)
+    }
+
+    /// The exemplar's structure level at this extent and its structure.
+    fn reference(&self) -> Option<(&Level, &Structure)> {
+        self.reference.as_ref().map(|(l, s)| (l, s))
     }
 }
 
-/// The structural thresholds sampling compares with the exemplar. With a
-/// resized level-0 box (`extent` other than 1, 1, 1) the variant is meant to
-/// differ from the exemplar in size, so the size terms (fragment, shrunken,
-/// and thin_part_lost, a count of voxels that shrinks with the box) are off;
-/// pieces, tears, openings and the inside seen still count.
-fn structure_params(opts: &SampleOptions) -> StructureParams {
-    let mut params = StructureParams::default();
-    if opts.extent != [1.0; 3] {
-        params.min_extent_ratio = 0.0;
-        params.min_mass_ratio = 0.0;
-        params.min_thin_ratio = 0.0;
-    }
-    params
+/// The structural thresholds sampling compares with the exemplar: at any
+/// extent the same, since a resized pass is judged against the exemplar at
+/// its extent ([`AtExtent`]).
+fn structure_params() -> StructureParams {
+    StructureParams::default()
 }
 
 /// How one coarse-to-fine attempt came out at the structure level.
@@ -598,10 +611,22 @@ fn could_bend(opts: &SampleOptions) -> bool {
 }
 
 /// How a pass starts: a level-0 shape drawn by the network (its pruned
-/// tensor and level), or the exemplar bent.
+/// tensor and level), the exemplar bent, or a box resized.
 enum Start {
     Drawn(SparseTensor, Level),
     Bent(Bend),
+    /// The networks offer only copies: the pass starts again in a resized box.
+    Resized(Extent),
+}
+
+/// One coarse-to-fine pass: its levels, the last one's pruned tensor, and
+/// how it started where not from the network in the sampling's box: bent,
+/// or resized (with the exemplar at that extent, which judges it).
+struct Pass {
+    levels: Vec<Level>,
+    cur: SparseTensor,
+    bend: Option<Bend>,
+    resized: Option<AtExtent>,
 }
 
 /// A passing level-0 candidate whose 1-voxel-tolerant F-score against the
@@ -725,7 +750,7 @@ fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params
 impl OneVariant<'_> {
     /// Level 0 from the noise of `seed`, pruned.
     fn level0(&self, resolution0: u32, seed: u64, opts: &SampleOptions) -> Result<SparseTensor> {
-        let (lo, size) = self.box0;
+        let (lo, size) = self.at.box0;
         let bx = SparseGrid::full_box(resolution0, lo, size)?;
         let noise = gaussian(bx.len(), seed, 0, 0, self.models.device);
         let x = SparseTensor::new(Arc::new(bx), noise)?;
@@ -740,11 +765,23 @@ impl OneVariant<'_> {
     /// the least like the exemplar's level 0 (the lowest 1-voxel-tolerant
     /// F-score, then the largest changed region); when none passes, the
     /// best scoring.
+    ///
+    /// Where none is new enough and the exemplar is not bent, with
+    /// `resize_max`, the pass is resized instead ([`Start::Resized`]), and so
+    /// at once are the variant's later attempts. A resized box keeps the
+    /// first candidate that passes against the exemplar at its extent: the
+    /// size is what is new.
     fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<Start> {
-        let (ex_level, ex_structure) = self.exemplar0;
-        let params = structure_params(opts);
+        if self.resizing && self.copies_only.get() {
+            if let Some(extent) = self.drawn_extent(seed, opts) {
+                return Ok(Start::Resized(extent));
+            }
+        }
+        let (ex_level, ex_structure) = (&self.at.level0, &self.at.structure0);
+        let params = structure_params();
         let candidates = opts.level0_candidates.max(1);
-        let mut pick = Level0Pick::new(opts.level0_pick, opts.level0_min_structure);
+        let policy = if self.at.extent.is_same() { opts.level0_pick } else { crate::config::Level0Pick::First };
+        let mut pick = Level0Pick::new(policy, opts.level0_min_structure);
         // The candidates the pick may still keep: the best scoring (the
         // fallback) and its pick so far.
         let mut best: Option<(SparseTensor, Level)> = None;
@@ -775,10 +812,20 @@ impl OneVariant<'_> {
             }
         }
         let (k, why) = pick.kept().expect("at least one candidate");
-        if let (false, Bending::Bends(voxels)) = (matches!(why, Kept::First | Kept::NewEnough { .. }), self.bending) {
-            let bend = Bend { seed: derive_seed(seed, 0, Stream::Bend, 0), voxels: voxels as f32 };
-            log::info!("level 0: none of {candidates} candidates new enough: the exemplar bent instead (seed {})", bend.seed);
-            return Ok(Start::Bent(bend));
+        if !matches!(why, Kept::First | Kept::NewEnough { .. }) {
+            if let Bending::Bends(voxels) = self.bending {
+                let bend = Bend { seed: derive_seed(seed, 0, Stream::Bend, 0), voxels: voxels as f32 };
+                log::info!("level 0: none of {candidates} candidates new enough: the exemplar bent instead (seed {})", bend.seed);
+                return Ok(Start::Bent(bend));
+            }
+            if let Some(extent) = self.resizing.then(|| self.drawn_extent(seed, opts)).flatten() {
+                self.copies_only.set(true);
+                log::info!(
+                    "level 0: none of {candidates} candidates new enough (the networks copy the exemplar): resized to extent {} instead",
+                    extent.extent.map(|e| e.to_string()).join(",")
+                );
+                return Ok(Start::Resized(extent));
+            }
         }
         match why {
             Kept::First if k > 0 => log::info!("level 0: candidate {k} kept, {k} rejected"),
@@ -801,14 +848,14 @@ impl OneVariant<'_> {
     /// upsampler alone, over the exemplar's level 1 ([`ThinAtLevel1`]); None
     /// where the exemplar has no thin parts to lose there.
     fn thin_ratio_at_level1(&self, x: &SparseTensor) -> Result<Option<f64>> {
-        let (Some(ex1), Some(Some(up))) = (self.exemplar1, self.models.upsamplers.get(1)) else {
+        let (Some(_), Some(Some(up))) = (&self.at.thin1, self.models.upsamplers.get(1)) else {
             return Ok(None);
         };
         if x.is_empty() {
             return Ok(Some(0.0));
         }
         let level1 = up.net.forward_t(x, false)?.prune_by_mask()?.to_level(1, self.frame)?;
-        Ok(Some(ex1.ratio(&level1)))
+        Ok(self.at.thin_ratio(&level1))
     }
 
     /// The variant: one coarse-to-fine pass from its seed, or with
@@ -822,12 +869,15 @@ impl OneVariant<'_> {
     /// bent).
     fn run(&self, resolution0: u32, opts: &SampleOptions, from: Option<&Level>) -> Result<SampledVariant> {
         let attempts = if from.is_some() { 1 } else { opts.attempts.max(1) };
-        let reference = self.structure_reference.filter(|(l, _)| l.index <= self.last);
-        let Some((ex_level, ex_structure)) = reference.filter(|_| attempts > 1) else {
-            let (levels, _, bend) = self.pass(self.seed, resolution0, opts, from, self.last)?;
-            return Ok(SampledVariant { levels, bend });
+        let reference = self.at.reference().filter(|(l, _)| l.index <= self.last);
+        let Some((ex_level, _)) = reference.filter(|_| attempts > 1) else {
+            let p = self.pass(self.seed, resolution0, opts, from, self.last)?;
+            let extent = self.extent_of(&p);
+            return Ok(SampledVariant { levels: p.levels, bend: p.bend, extent });
         };
-        let (mut levels, cur, bend) = self.kept_attempt(resolution0, opts, ex_level, ex_structure, attempts)?;
+        let p = self.kept_attempt(resolution0, opts, ex_level.index, attempts)?;
+        let extent = self.extent_of(&p);
+        let Pass { mut levels, cur, bend, .. } = p;
         levels.iter().for_each(|l| self.tell(l));
         let next = levels.len();
         match &bend {
@@ -839,55 +889,81 @@ impl OneVariant<'_> {
                 self.descend(cur, next, self.last, opts, &mut levels)?;
             }
         }
-        Ok(SampledVariant { levels, bend })
+        Ok(SampledVariant { levels, bend, extent })
     }
 
-    /// The levels, up to the structure level, of the pass [`keep_attempt`]
-    /// keeps of `attempts`; with its pruned tensor of that level, for the
-    /// finer levels.
-    fn kept_attempt(
-        &self,
-        resolution0: u32,
-        opts: &SampleOptions,
-        ex_level: &Level,
-        ex_structure: &Structure,
-        attempts: usize,
-    ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
-        let params = structure_params(opts);
+    /// The extent a pass's variant records: the resized pass's, else the
+    /// sampling's own where it is not the exemplar's.
+    fn extent_of(&self, p: &Pass) -> Option<Extent> {
+        p.resized.as_ref().map(|r| r.extent).or((!self.at.extent.is_same()).then_some(self.at.extent))
+    }
+
+    /// A resized pass's extent from the pass's level-0 seed, where
+    /// `resize_max` allows one ([`Extent::drawn`]).
+    fn drawn_extent(&self, seed: u64, opts: &SampleOptions) -> Option<Extent> {
+        Extent::drawn(&self.exemplar_levels[0], opts.resize_max, seed)
+    }
+
+    /// The structure scores of `level` (at the structure level) of pass `p`:
+    /// a bent pass against its own pose; a resized one, or any pass of a
+    /// resized sampling, against the exemplar at its extent, its style
+    /// against the exemplar's own patches; else against the exemplar.
+    fn judged(&self, p: &Pass, level: &Level) -> Option<StructureScores> {
+        let params = structure_params();
+        let structure = Structure::of(level);
+        let style = self.style.or(self.at.reference());
+        let at = p.resized.as_ref().unwrap_or(self.at);
+        let (ex_level, ex_structure) = at.reference()?;
+        Some(match (&p.bend, &p.resized) {
+            // A bent pass's level is the exemplar's bent (and repaired): its own pose.
+            (Some(_), _) => StructureScores::against_bend(level, &structure, (level, &structure), ex_level, ex_structure, &params),
+            (None, Some(_)) => StructureScores::at_extent(level, &structure, (ex_level, ex_structure), style?, &params),
+            (None, None) => match self.style {
+                Some(style) => StructureScores::at_extent(level, &structure, (ex_level, ex_structure), style, &params),
+                None => StructureScores::new(level, &structure, ex_level, ex_structure, &params),
+            },
+        })
+    }
+
+    /// The pass [`keep_attempt`] keeps of `attempts`, its levels up to the
+    /// structure level (`structure_index`), with its pruned tensor of that
+    /// level, for the finer levels.
+    fn kept_attempt(&self, resolution0: u32, opts: &SampleOptions, structure_index: usize, attempts: usize) -> Result<Pass> {
         // Attempts are not told of their levels: the kept one's are told
         // once it is kept.
         let quiet = OneVariant { told: None, ..*self };
         let (a, rank, kept) = keep_attempt(attempts, opts.reject_copies, |a| {
-            let (levels, cur, bend) = quiet.pass(attempt_seed(self.seed, a), resolution0, opts, None, ex_level.index)?;
-            let level = &levels[ex_level.index];
-            let rank = if level.is_empty() {
-                AttemptRank { whole: false, new: false, score: 0.0 }
-            } else {
-                let structure = Structure::of(level);
-                let s = match &bend {
-                    None => StructureScores::new(level, &structure, ex_level, ex_structure, &params),
-                    // A bent pass's level is the exemplar's bent (and repaired):
-                    // its own pose.
-                    Some(_) => StructureScores::against_bend(level, &structure, (level, &structure), ex_level, ex_structure, &params),
-                };
-                log::debug!("attempt {a}{}: structure {:.3} {:?}", if bend.is_some() { " (bent)" } else { "" }, s.score, s.flags);
-                AttemptRank { whole: s.whole(), new: !s.flags.contains(&Flag::NearCopy), score: s.score }
+            let p = quiet.pass(attempt_seed(self.seed, a), resolution0, opts, None, structure_index)?;
+            let level = &p.levels[structure_index];
+            let rank = match self.judged(&p, level).filter(|_| !level.is_empty()) {
+                None => AttemptRank { whole: false, new: false, score: 0.0 },
+                Some(s) => {
+                    let how = match (&p.bend, &p.resized) {
+                        (Some(_), _) => " (bent)".to_string(),
+                        (None, Some(r)) => format!(" (extent {})", r.extent.extent.map(|e| e.to_string()).join(",")),
+                        _ => String::new(),
+                    };
+                    log::debug!("attempt {a}{how}: structure {:.3} {:?}", s.score, s.flags);
+                    AttemptRank { whole: s.whole(), new: !s.flags.contains(&Flag::NearCopy), score: s.score }
+                }
             };
-            Ok((rank, (levels, cur, bend)))
+            Ok((rank, p))
         })?;
-        let res = ex_level.resolution;
+        let res = self.exemplar_levels[structure_index].resolution;
         match (rank.accepted(opts.reject_copies), rank.whole) {
             (true, _) if a > 0 => log::info!("variant kept at attempt {a} (structure {:.3} at {res}^3)", rank.score),
             (true, _) => {}
             (false, true) => log::warn!(
                 "every attempt of {attempts} whole at {res}^3 was a near copy of the exemplar: the best kept (structure {:.3}){}",
                 rank.score,
-                // Where the networks only copy, bends are what gives a new shape.
+                // Where the networks only copy, bends and resizes are what give a new shape.
                 match self.bending {
                     Bending::Never if opts.bend_voxels == 0.0 && could_bend(opts) => {
                         "; for a figure with nothing repeated in it (a statue, an animal), --set sample.bend_voxels=2 poses it anew"
                     }
-                    Bending::NotAFigure => "; the exemplar has flat faces or upright walls, so it is not bent (--set sample.bend_exemplars=all bends it)",
+                    Bending::NotAFigure if opts.resize_max == 0.0 => {
+                        "; the networks copy what appears once in the exemplar: --set sample.resize_max=1.75 draws resized boxes instead (a longer house), or try --extent"
+                    }
                     _ => "",
                 }
             ),
@@ -903,14 +979,7 @@ impl OneVariant<'_> {
     /// `level0_seed` (or `from`, continued), the finer levels from the
     /// variant's own seed (so continuing from an unedited level reproduces
     /// the finer levels of the pass that made it, whichever attempt that was).
-    fn pass(
-        &self,
-        level0_seed: u64,
-        resolution0: u32,
-        opts: &SampleOptions,
-        from: Option<&Level>,
-        last: usize,
-    ) -> Result<(Vec<Level>, SparseTensor, Option<Bend>)> {
+    fn pass(&self, level0_seed: u64, resolution0: u32, opts: &SampleOptions, from: Option<&Level>, last: usize) -> Result<Pass> {
         let mut out = Vec::new();
         let mut bend = None;
         let (cur, first) = match from {
@@ -926,6 +995,12 @@ impl OneVariant<'_> {
                     bend = Some(b);
                     (cur, out.len())
                 }
+                Start::Resized(extent) => {
+                    let at = AtExtent::of(self.exemplar_levels, extent, self.at.structure0.sheet_axis, false)?;
+                    let resized = OneVariant { at: &at, style: self.style.or(self.at.reference()), resizing: false, ..*self };
+                    let p = resized.pass(level0_seed, resolution0, opts, None, last)?;
+                    return Ok(Pass { resized: Some(at), ..p });
+                }
             },
             Some(level) => {
                 let one = SparseTensor::from_level(level, self.models.device)?.prune_by_mask()?;
@@ -933,7 +1008,7 @@ impl OneVariant<'_> {
             }
         };
         let cur = self.descend(cur, first, last, opts, &mut out)?;
-        Ok((out, cur, bend))
+        Ok(Pass { levels: out, cur, bend, resized: None })
     }
 
     /// Tells the sink, where there is one, of a level of the variant.
@@ -1147,15 +1222,17 @@ mod tests {
         // At 32^3 (a voxel is 0.0625) the ears (4 voxels across) are thin,
         // the body is not.
         let (exemplar, one_ear, ball) = bunny_of_spheres(32);
+        let (exemplar0, _, ball0) = bunny_of_spheres(16);
         let p = StructureParams::default();
-        let levels = [Level::default(), exemplar.clone()];
-        let ex1 = ThinAtLevel1::of(&levels, &p).expect("the ears are thin parts");
-        assert_eq!(ex1.ratio(&exemplar), 1.0);
-        let r = ex1.ratio(&one_ear);
+        let levels = [exemplar0.clone(), exemplar.clone()];
+        let at = AtExtent::of(&levels, Extent::SAME, None, false).unwrap();
+        assert!(at.thin1.is_some(), "the ears are thin parts");
+        assert_eq!(at.thin_ratio(&exemplar), Some(1.0));
+        let r = at.thin_ratio(&one_ear).unwrap();
         assert!(r < p.min_thin_ratio, "one ear of two lost: thin ratio {r}");
         // A ball has no thin part to lose: no check.
-        assert!(ThinAtLevel1::of(&[Level::default(), ball], &p).is_none());
-        assert!(ThinAtLevel1::of(&levels[..1], &p).is_none(), "no level 1, no check");
+        assert!(AtExtent::of(&[ball0, ball], Extent::SAME, None, false).unwrap().thin1.is_none());
+        assert!(AtExtent::of(&levels[..1], Extent::SAME, None, false).unwrap().thin1.is_none(), "no level 1, no check");
     }
 
     #[test]
@@ -1168,14 +1245,26 @@ mod tests {
     }
 
     #[test]
-    fn a_resized_box_turns_the_size_flags_off_and_nothing_else() {
-        let config = Config::load("demo", &[]).expect("demo profile");
-        let mut opts = SampleOptions::from_config(&config, 1, 0);
-        assert_eq!(structure_params(&opts), StructureParams::default());
-        opts.extent = [2.0, 1.0, 1.0];
-        let p = structure_params(&opts);
-        assert_eq!((p.min_extent_ratio, p.min_mass_ratio, p.min_thin_ratio), (0.0, 0.0, 0.0));
-        let d = StructureParams::default();
-        assert_eq!((p.free_boundary_ratio, p.min_enclosure_ratio, p.max_seen_through_excess), (d.free_boundary_ratio, d.min_enclosure_ratio, d.max_seen_through_excess));
+    fn a_resized_shape_is_judged_against_the_exemplar_at_its_extent() {
+        let (exemplar0, _, _) = bunny_of_spheres(16);
+        let (mut exemplar, _, _) = bunny_of_spheres(32);
+        exemplar.index = 1;
+        let levels = [exemplar0, exemplar.clone()];
+        let extent = Extent { extent: [1.5, 1.0, 1.0] };
+        let at = AtExtent::of(&levels, extent, None, false).unwrap();
+        let (ref_level, ref_structure) = at.reference().expect("a structure level");
+        assert_eq!(ref_level.index, 1);
+        let p = structure_params();
+        let e = Structure::of(&exemplar);
+        // The exemplar as long as the box: whole at its extent, and not the
+        // exemplar's size.
+        let long = extent.of(&levels, 1).unwrap();
+        let judged = StructureScores::at_extent(&long, &Structure::of(&long), (ref_level, ref_structure), (&exemplar, &e), &p);
+        assert!(judged.whole() && judged.extent_ratio > 0.99 && (judged.mass_ratio - 1.0).abs() < 0.01, "{judged:?}");
+        let plain = StructureScores::new(&long, &Structure::of(&long), &exemplar, &e, &p);
+        assert!(plain.score < 0.8, "against the exemplar's own box the size is off: {plain:?}");
+        // The exemplar's own size in the longer box is cut short.
+        let short = StructureScores::at_extent(&exemplar, &e, (ref_level, ref_structure), (&exemplar, &e), &p);
+        assert!(short.flags.contains(&Flag::Shrunken), "{short:?}");
     }
 }

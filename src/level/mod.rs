@@ -9,6 +9,7 @@ pub mod figure;
 pub mod files;
 pub mod height_field;
 pub mod repair;
+pub mod resize;
 pub mod seen_through;
 pub mod structure;
 pub mod warp;

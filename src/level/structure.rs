@@ -395,6 +395,13 @@ pub fn free_boundary(level: &Level) -> Vec<bool> {
         .collect()
 }
 
+/// A bounding box side this many voxels shorter or longer than the
+/// exemplar's counts as the same (`extent_ratio`): on a fault-line terrain
+/// whose relief is 6 voxels at 64^3, whole variants read 5, a ratio of 0.83
+/// that flagged 7 of 10 `shrunken`; a bunny whose ears lost their tips is
+/// 13 voxels of 16 at 16^3, still shrunken at (13 + 1) / 16.
+pub const EXTENT_TOLERANCE_VOXELS: f64 = 1.0;
+
 /// Thresholds of the structural flags, in the figures' own units. Chosen on
 /// the degradation ladder and on sampled variants (docs/results.md, "Whole shapes").
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -421,6 +428,15 @@ pub struct StructureParams {
     /// ([`largest_change`]: a ruin, a wing of its own).
     pub copy_fscore: f64,
     pub copy_max_change: f64,
+    /// A shape whose differences from the exemplar are all parts of it
+    /// moved ([`Matching::moved_parts_only`]: every changed region of at
+    /// least `moved_min_share` of the exemplar's surface voxels gone in one
+    /// place and found again, the same shape, in another), with as much
+    /// surface as the exemplar (within `moved_mass_slack`), is a near copy
+    /// too: the exemplar with one building shifted, where a doubled
+    /// courtyard adds surface and is new.
+    pub moved_min_share: f64,
+    pub moved_mass_slack: f64,
     /// More of the inside seen than the exemplar shows, in some view band (a
     /// share of the silhouette, [`super::seen_through::seen_through_excess`]):
     /// split open or torn through. 0.02, measured (docs/results.md): on real
@@ -470,6 +486,8 @@ impl Default for StructureParams {
             min_enclosure_ratio: 0.85,
             copy_fscore: 0.95,
             copy_max_change: 0.04,
+            moved_min_share: 0.01,
+            moved_mass_slack: 0.06,
             max_seen_through_excess: 0.02,
             min_thin_ratio: 0.8,
             min_exemplar_thin_share: 0.02,
@@ -560,7 +578,9 @@ pub struct StructureScores {
     pub resolution: u32,
     /// Surface voxels, variant / exemplar.
     pub mass_ratio: f64,
-    /// Bounding box, variant / exemplar, along the axis where it is smallest.
+    /// Bounding box, variant / exemplar, along the axis where it is
+    /// smallest, the variant's side moved one voxel toward the exemplar's
+    /// ([`EXTENT_TOLERANCE_VOXELS`]).
     pub extent_ratio: f64,
     /// Pieces (components of 5% or more) of the variant, and of the exemplar.
     pub pieces: usize,
@@ -643,7 +663,15 @@ impl StructureScores {
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
         let sym = |r: f64| if r > 0.0 { r.min(1.0 / r) } else { 0.0 };
         let mass_ratio = ratio(s.voxels as f64, e.voxels as f64);
-        let axis_ratios: Vec<f64> = (0..3).map(|a| ratio(s.extent[a] as f64, e.extent[a] as f64)).collect();
+        // A side one voxel shorter or longer is the same size: a thin relief
+        // of 5 voxels against 6 is a rounding of the surface, not a part
+        // lost (EXTENT_TOLERANCE_VOXELS).
+        let axis_ratios: Vec<f64> = (0..3)
+            .map(|a| {
+                let (v, x) = (s.extent[a] as f64, e.extent[a] as f64);
+                ratio(v + (x - v).clamp(-EXTENT_TOLERANCE_VOXELS, EXTENT_TOLERANCE_VOXELS), x)
+            })
+            .collect();
         let extent_ratio = axis_ratios.iter().copied().fold(f64::INFINITY, f64::min);
         let (fb, efb) = (s.free_boundary_share(), e.free_boundary_share());
         let enclosure_ratio = ratio(s.enclosure, e.enclosure);
@@ -701,7 +729,10 @@ impl StructureScores {
         if unlike_share > p.max_unlike_share {
             flags.push(Flag::OutOfStyle);
         }
-        if copy_fscore >= p.copy_fscore && largest_change < p.copy_max_change {
+        let moved_only = (copy_fscore < p.copy_fscore || largest_change >= p.copy_max_change)
+            && (mass_ratio - 1.0).abs() <= p.moved_mass_slack
+            && matching.moved_parts_only(p.moved_min_share);
+        if (copy_fscore >= p.copy_fscore && largest_change < p.copy_max_change) || moved_only {
             flags.push(Flag::NearCopy);
         }
         StructureScores {
@@ -774,6 +805,25 @@ impl StructureScores {
     }
 }
 
+impl StructureScores {
+    /// The scores of a shape sampled in a resized box
+    /// ([`crate::level::resize`]): against the exemplar at that extent
+    /// (`at_extent`: its level stretched, and that level's structure) for
+    /// size, surface, pieces, openings, the inside seen and copies; its
+    /// out-of-style patches against the exemplar's own level (`style`: a
+    /// stretched wall's stones are not the exemplar's style, a longer wall
+    /// of the same stones is).
+    pub fn at_extent(
+        shape_level: &Level,
+        s: &Structure,
+        at_extent: (&Level, &Structure),
+        style: (&Level, &Structure),
+        p: &StructureParams,
+    ) -> Self {
+        Self::with_pose(shape_level, s, at_extent.0, at_extent.1, (style.0, at_extent.1), p)
+    }
+}
+
 /// The largest place where shape `a` differs from `b` (same resolution): the
 /// voxels of either with no voxel of the other within 1 voxel (Chebyshev),
 /// grouped into 26-connected regions, the largest region's size as a share of
@@ -838,6 +888,62 @@ impl Matching {
             2.0 * precision * recall / (precision + recall)
         }
     }
+}
+
+impl Matching {
+    /// Whether every difference of `a` from `b` is a part of `b` moved: each
+    /// region (26-connected) of `b`'s voxels that `a` lacks and each region
+    /// of voxels `a` adds, of at least `min_share` of `b`'s voxels, pairs
+    /// with a region of the other kind that is its shape translated (its
+    /// voxels, moved by the difference of the two centroids, within 1 voxel
+    /// of the other's for [`MOVED_OVERLAP`] of them both ways, and sizes
+    /// within a third of each other); smaller regions are a surface's
+    /// jitter. False where nothing large changed (that is
+    /// [`largest_change`]'s case) or something is left unpaired: a part
+    /// added, lost or made anew.
+    pub fn moved_parts_only(&self, min_share: f64) -> bool {
+        let min = (min_share * self.b_voxels as f64).max(1.0);
+        let regions = |set: &[IVec3]| -> Vec<Vec<IVec3>> {
+            let (labels, sizes) = component_labels(set);
+            let mut out: Vec<Vec<IVec3>> = sizes.iter().map(|&n| Vec::with_capacity(n)).collect();
+            for (c, l) in set.iter().zip(labels) {
+                out[l].push(*c);
+            }
+            out.retain(|r| r.len() as f64 >= min);
+            out
+        };
+        let (gone, added) = (regions(&self.b_unmatched), regions(&self.a_unmatched));
+        if gone.is_empty() || gone.len() != added.len() {
+            return false;
+        }
+        let mut free = vec![true; gone.len()];
+        added.iter().all(|a| {
+            let found = (0..gone.len()).find(|&g| free[g] && translated_alike(&gone[g], a));
+            found.map(|g| free[g] = false).is_some()
+        })
+    }
+}
+
+/// Share of each of two regions' voxels that must lie within 1 voxel of the
+/// other's, once moved onto it, for [`Matching::moved_parts_only`] to call
+/// one the other moved.
+pub const MOVED_OVERLAP: f64 = 0.7;
+
+/// Whether region `b` is region `a` translated (see [`MOVED_OVERLAP`]).
+fn translated_alike(a: &[IVec3], b: &[IVec3]) -> bool {
+    let (na, nb) = (a.len() as f64, b.len() as f64);
+    if na.min(nb) / na.max(nb) < 2.0 / 3.0 {
+        return false;
+    }
+    let centroid = |r: &[IVec3]| r.iter().fold(glam::DVec3::ZERO, |s, c| s + c.as_dvec3()) / r.len() as f64;
+    let d = (centroid(b) - centroid(a)).round().as_ivec3();
+    let moved: Vec<IVec3> = a.iter().map(|&c| c + d).collect();
+    let near = |from: &[IVec3], to: &[IVec3]| -> f64 {
+        let set: HashSet<IVec3> = to.iter().copied().collect();
+        let hit = from.iter().filter(|&&c| set.contains(&c) || NEIGHBOURS_26.iter().any(|&n| set.contains(&(c + n)))).count();
+        hit as f64 / from.len() as f64
+    };
+    near(&moved, b) >= MOVED_OVERLAP && near(b, &moved) >= MOVED_OVERLAP
 }
 
 /// Two levels' surface voxels matched both ways with a 1-voxel (Chebyshev)
@@ -993,6 +1099,31 @@ mod tests {
         assert!(gone >= above && gone < whole.len() / 4 && added == 0, "gone {gone}, added {added}, {above} above the cut");
         // The other way round the cap is added and nothing is gone.
         assert_eq!(Matching::of(&whole, &capless).gone_and_added(), (0, gone));
+    }
+
+    #[test]
+    fn a_part_moved_elsewhere_is_a_near_copy_and_a_part_doubled_is_new() {
+        use crate::testing::synthetic::sphere_union;
+        let (a, b, b_moved, c) = (Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.3, 0.0, 0.0), Vec3::new(0.3, 0.0, 0.6), Vec3::new(-0.5, 0.0, 0.6));
+        let ex = sphere_union(64, &[(a, 0.2), (b, 0.2)]);
+        let moved = sphere_union(64, &[(a, 0.2), (b_moved, 0.2)]);
+        let doubled = sphere_union(64, &[(a, 0.2), (b, 0.2), (c, 0.2)]);
+        let lost = sphere_union(64, &[(a, 0.2)]);
+        let p = StructureParams::default();
+        let (es, params) = (Structure::of(&ex), &p);
+        let score = |l: &Level| StructureScores::new(l, &Structure::of(l), &ex, &es, params);
+        let m = score(&moved);
+        assert!(m.copy_fscore < p.copy_fscore, "not a copy by the F-score alone: {m:?}");
+        assert!(m.flags.contains(&Flag::NearCopy), "{m:?}");
+        let d = score(&doubled);
+        assert!(!d.flags.contains(&Flag::NearCopy), "{d:?}");
+        let l = score(&lost);
+        assert!(!l.flags.contains(&Flag::NearCopy), "{l:?}");
+        // Moved and turned into something else: a ball where a ball was, a
+        // long rod somewhere new.
+        let rod = sphere_union(64, &[(a, 0.2), (Vec3::new(0.3, 0.0, 0.5), 0.12), (Vec3::new(0.3, 0.0, 0.68), 0.12), (Vec3::new(0.3, 0.0, 0.32), 0.12)]);
+        let r = score(&rod);
+        assert!(!r.flags.contains(&Flag::NearCopy), "{r:?}");
     }
 
     #[test]

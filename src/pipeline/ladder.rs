@@ -122,6 +122,7 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
             fine: crate::level::structure::fine_level(l).cloned(),
             mesh: None,
             bend: None,
+            extent: None,
         })
         .collect();
     let evaluation = crate::eval::evaluate::evaluate(exemplar_dir, None, &files, 256)?;

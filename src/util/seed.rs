@@ -31,6 +31,9 @@ pub enum Stream {
     /// The bend of one attempt of a variant that starts from the exemplar
     /// bent (`level::warp`).
     Bend = 13,
+    /// The extent of one pass of a variant that starts from a resized box
+    /// (`level::resize`).
+    Resize = 14,
 }
 
 /// SplitMix64 of the tuple (seed, index, stream, step): `index` is the level

@@ -50,6 +50,11 @@ pub struct VariantScores {
     /// same way ([`StructureScores::against_bend`]). Not written when false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub bent: bool,
+    /// The extent of its level-0 box against the exemplar's, where it is not
+    /// the exemplar's: its structure is judged against the exemplar at that
+    /// extent ([`StructureScores::at_extent`]). Not written when none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extent: Option<[f32; 3]>,
     /// Chamfer distance of the level-0 point set to the exemplar's, normalised
     /// units (bounding-box diagonal 2); None when not measured.
     pub coarse_chamfer: Option<f64>,
@@ -125,6 +130,9 @@ pub struct ShapeInput<'a> {
     /// out-of-style patches are judged against
     /// ([`StructureScores::against_bend`]).
     pub bent_reference: Option<&'a Level>,
+    /// For a variant sampled in a resized box: its extent and the exemplar's
+    /// structure level at that extent ([`crate::level::resize::stretched`]).
+    pub at_extent: Option<([f32; 3], &'a Level)>,
     /// The level after the structure level (128^3) and the exemplar's same
     /// level to compare it with (bent where the variant was), if both exist
     /// ([`StructureScores::with_fine`]).
@@ -214,6 +222,10 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
                 (Some((el, es)), Some(vl), Some(bent)) if vl.resolution == el.resolution && bent.resolution == el.resolution => {
                     Some(StructureScores::against_bend(vl, &Structure::of(vl), (bent, &Structure::of(bent)), el, es, &params.structure))
                 }
+                (Some((el, es)), Some(vl), None) if vl.resolution == el.resolution && v.at_extent.is_some_and(|(_, a)| a.resolution == el.resolution) => {
+                    let at = v.at_extent.expect("matched").1;
+                    Some(StructureScores::at_extent(vl, &Structure::of(vl), (at, &Structure::of(at)), (el, es), &params.structure))
+                }
                 (Some((el, es)), Some(vl), _) if vl.resolution == el.resolution => {
                     Some(StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure))
                 }
@@ -224,6 +236,7 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
                 None => scores,
             }),
             bent: v.bent_reference.is_some(),
+            extent: v.at_extent.map(|(e, _)| e),
             coarse_chamfer: cd,
         });
         cover_sets = Some(match cover_sets {
@@ -306,6 +319,7 @@ impl EvalReport {
         mean.name = "mean".into();
         // Flags and the bent mark are per variant: the mean has none.
         mean.bent = false;
+        mean.extent = None;
         if let Some(s) = mean.structure.as_mut() {
             s.flags.clear();
         }
@@ -333,6 +347,10 @@ impl EvalReport {
             });
             if v.bent {
                 flags = if flags.is_empty() { "(bent)".into() } else { format!("{flags} (bent)") };
+            }
+            if let Some(e) = v.extent {
+                let e = format!("(extent {})", e.map(|x| x.to_string()).join(","));
+                flags = if flags.is_empty() { e } else { format!("{flags} {e}") };
             }
             format!(
                 "{:<width$}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.3}  {:>7.2}  {:>7.3}  {:>7}  {:>7}  {:>9}  {:>6}  {}\n",
@@ -385,6 +403,9 @@ impl EvalReport {
         if self.variants.iter().any(|v| v.bent) {
             s += "(bent): the exemplar bent; seen_through and the out-of-style flags are judged against the exemplar bent the same way\n";
         }
+        if self.variants.iter().any(|v| v.extent.is_some()) {
+            s += "(extent): sampled in a box resized by these factors; judged against the exemplar at that extent\n";
+        }
         s
     }
 }
@@ -405,6 +426,7 @@ impl VariantScores {
             colour: None,
             structure: None,
             bent: false,
+            extent: None,
             coarse_chamfer: None,
         }
     }
@@ -475,7 +497,7 @@ mod tests {
         let shifted = vec![Vec3::new(0.0, 0.1, 0.0), Vec3::new(1.0, 0.1, 0.0)];
         let (exh, v1h, parth) = (halve(&ex), halve(&v1), halve(&part));
         let (lex, lv1, lpart) = (level_of(&ex), level_of(&v1), level_of(&part));
-        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None, bent_reference: None, fine_level: None };
+        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None, bent_reference: None, at_extent: None, fine_level: None };
         let r = evaluate(
             &shape("exemplar", &ex, &exh, &lex, Some(&pts)),
             &[
@@ -508,13 +530,13 @@ mod tests {
         let full = Occupancy { bits: full.bits.iter().map(|&w| w & last_word_mask(16)).collect(), ..full };
         let empty = Occupancy::empty(ex.dims);
         let l = level_of(&ex);
-        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None, bent_reference: None, fine_level: None };
+        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None, bent_reference: None, at_extent: None, fine_level: None };
         assert!(matches!(check_shape(&shape(&empty)), Err(DegenerateShape::NoSurface(_))));
         let e = check_shape(&shape(&full)).unwrap_err();
         assert!(matches!(e, DegenerateShape::Filled(..)) && e.to_string().contains("fills 100%"), "{e}");
         assert!(check_shape(&shape(&ex)).is_ok());
         let empty_level = Level { resolution: 16, ..Default::default() };
-        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None, bent_reference: None, fine_level: None };
+        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None, bent_reference: None, at_extent: None, fine_level: None };
         assert!(matches!(check_shape(&s), Err(DegenerateShape::EmptyLevel(_))));
     }
 }
