@@ -327,6 +327,7 @@ pub fn evaluate(
         structure_level: ex_structure,
         bent_reference: None,
         at_extent: None,
+        level0: None,
         fine_level: None,
     };
     let inputs: Vec<ShapeInput> = variants
@@ -345,6 +346,7 @@ pub fn evaluate(
             structure_level: v.structure.as_ref(),
             bent_reference: b.as_ref(),
             at_extent: ae.as_ref().map(|(e, l)| (*e, l)),
+            level0: (v.bend.is_none() && ae.is_none() && v.coarsest.index == 0).then_some((&v.coarsest, &levels[0])),
             fine_level: v.fine.as_ref().zip(fr.as_deref()),
         })
         .collect();

@@ -793,7 +793,9 @@ impl OneVariant<'_> {
                 return Ok(Start::Drawn(x, level));
             }
             let (score, mut part_lost, likeness) = level0_gate(&level, ex_level, ex_structure, &params);
-            if !part_lost && pick.passes(score, false) && params.min_thin_ratio > 0.0 {
+            // In a resized box the thin parts are the stretched exemplar's,
+            // which a network's longer shape need not repeat voxel for voxel.
+            if !part_lost && pick.passes(score, false) && params.min_thin_ratio > 0.0 && self.at.extent.is_same() {
                 if let Some(ratio) = self.thin_ratio_at_level1(&x)? {
                     log::debug!("level 0 candidate {k}: thin ratio {ratio:.3} one level finer");
                     part_lost = ratio < params.min_thin_ratio;
@@ -920,7 +922,8 @@ impl OneVariant<'_> {
             (None, Some(_)) => StructureScores::at_extent(level, &structure, (ex_level, ex_structure), style?, &params),
             (None, None) => match self.style {
                 Some(style) => StructureScores::at_extent(level, &structure, (ex_level, ex_structure), style, &params),
-                None => StructureScores::new(level, &structure, ex_level, ex_structure, &params),
+                // In the exemplar's box, a level 0 that is the exemplar's makes a near copy.
+                None => StructureScores::new(level, &structure, ex_level, ex_structure, &params).with_coarse(&p.levels[0], &self.at.level0, &params),
             },
         })
     }

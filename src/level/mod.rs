@@ -11,6 +11,7 @@ pub mod height_field;
 pub mod repair;
 pub mod resize;
 pub mod seen_through;
+pub mod steps;
 pub mod structure;
 pub mod warp;
 

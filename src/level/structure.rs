@@ -77,6 +77,9 @@ pub struct Structure {
     /// ([`super::height_field::sheet_axes`]).
     #[serde(default)]
     pub sheet_axis: Option<usize>,
+    /// The top height map's steps and seams ([`super::steps::top_steps`]).
+    #[serde(default)]
+    pub top_steps: super::steps::TopSteps,
 }
 
 impl Structure {
@@ -99,6 +102,7 @@ impl Structure {
             thin: thin_count(level),
             enclosed_columns: super::height_field::enclosed_counts(level),
             sheet_axis: super::height_field::sheet_axis(level),
+            top_steps: super::steps::top_steps(level),
         }
     }
 
@@ -437,6 +441,15 @@ pub struct StructureParams {
     /// courtyard adds surface and is new.
     pub moved_min_share: f64,
     pub moved_mass_slack: f64,
+    /// Boundary F-score (1-voxel tolerance) at level 0 (16^3) at or above
+    /// which a shape sampled in the exemplar's box is a near copy whatever
+    /// its finer levels did ([`StructureScores::with_coarse`]): the finer
+    /// networks add cracks and notches to a single house whose level 0 is
+    /// the exemplar's voxel for voxel (F 1.000), and those damages read as
+    /// changes at 64^3. Measured: a single house's level 0, drawn by its
+    /// network, reads 1.000 against the exemplar's; the ruined tower's and
+    /// the demo's whole variants 0.960-0.995.
+    pub coarse_copy_fscore: f64,
     /// More of the inside seen than the exemplar shows, in some view band (a
     /// share of the silhouette, [`super::seen_through::seen_through_excess`]):
     /// split open or torn through. 0.02, measured (docs/results.md): on real
@@ -474,6 +487,10 @@ pub struct StructureParams {
     /// level ([`fine_level`], 128^3, against the exemplar's same level):
     /// fine out of style. MEASURED_FINE
     pub max_fine_unlike_share: f64,
+    /// More seams across the top surface than the exemplar's, along an
+    /// axis where its top is smooth ([`super::steps::extra_seams`]):
+    /// stepped. 0: a roof in two halves is broken.
+    pub max_extra_seams: usize,
 }
 
 impl Default for StructureParams {
@@ -488,12 +505,14 @@ impl Default for StructureParams {
             copy_max_change: 0.04,
             moved_min_share: 0.01,
             moved_mass_slack: 0.06,
+            coarse_copy_fscore: 0.998,
             max_seen_through_excess: 0.02,
             min_thin_ratio: 0.8,
             min_exemplar_thin_share: 0.02,
             max_hole_share: 0.001,
             max_unlike_share: 0.09,
             max_fine_unlike_share: 0.09,
+            max_extra_seams: 0,
         }
     }
 }
@@ -537,6 +556,10 @@ pub enum Flag {
     /// 128^3): ragged sheets and flakes that the finer stage (the detail
     /// transfer, or a network) made where the 64^3 level passes.
     FineOutOfStyle,
+    /// Its top surface steps where the exemplar's is smooth: a roof in two
+    /// halves a voxel or two apart, a crack across it at the finest level
+    /// ([`super::steps`]).
+    Stepped,
     /// Nearly the exemplar itself.
     NearCopy,
 }
@@ -554,13 +577,14 @@ impl Flag {
             Flag::Holed => "holed",
             Flag::OutOfStyle => "out_of_style",
             Flag::FineOutOfStyle => "fine_out_of_style",
+            Flag::Stepped => "stepped",
             Flag::NearCopy => "near_copy",
         }
     }
     /// The flag of a name [`Flag::name`] gives (as eval.json writes it).
     pub fn from_name(name: &str) -> Option<Flag> {
         use Flag::*;
-        [Fragment, Shrunken, Pieces, Torn, Open, SeenThrough, ThinPartLost, Holed, OutOfStyle, FineOutOfStyle, NearCopy]
+        [Fragment, Shrunken, Pieces, Torn, Open, SeenThrough, ThinPartLost, Holed, OutOfStyle, FineOutOfStyle, Stepped, NearCopy]
             .into_iter()
             .find(|f| f.name() == name)
     }
@@ -613,6 +637,10 @@ pub struct StructureScores {
     /// ([`unlike_share`]; 0 below 32^3).
     #[serde(default)]
     pub unlike_share: f64,
+    /// Seams across its top surface beyond the exemplar's, along an axis
+    /// where the exemplar's is smooth ([`super::steps::extra_seams`]).
+    #[serde(default)]
+    pub extra_seams: usize,
     /// The same share at the level after the structure level
     /// ([`fine_level`], 128^3; [`StructureScores::with_fine`]); not written
     /// where that level was not compared.
@@ -621,6 +649,12 @@ pub struct StructureScores {
     /// Boundary F-score to the exemplar's voxels with a 1-voxel tolerance
     /// (1: the exemplar's surface, voxel for voxel).
     pub copy_fscore: f64,
+    /// Boundary F-score (1-voxel tolerance) of the variant's level 0 to the
+    /// exemplar's ([`StructureScores::with_coarse`]); not written where not
+    /// compared (a bent or resized variant, whose level 0 is new by its
+    /// pose or size).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_copy_fscore: Option<f64>,
     /// The largest connected place where the variant differs from the
     /// exemplar, a share of the exemplar's surface voxels ([`largest_change`]).
     #[serde(default)]
@@ -685,6 +719,7 @@ impl StructureScores {
         let hole_columns = sheet_axis.map_or(0, |a| s.enclosed_columns[a]);
         let hole_limit = p.max_hole_share * e.voxels as f64;
         let unlike_share = unlike_share(shape_level, pose.0);
+        let extra_seams = super::steps::extra_seams(&s.top_steps, &e.top_steps);
         let terms = [
             sym(mass_ratio),
             axis_ratios.iter().map(|&r| sym(r)).fold(1.0, f64::min),
@@ -698,6 +733,7 @@ impl StructureScores {
             },
             if hole_columns > 0 { (hole_limit / hole_columns as f64).min(1.0) } else { 1.0 },
             if unlike_share > 0.0 { (p.max_unlike_share / unlike_share).min(1.0) } else { 1.0 },
+            if extra_seams > p.max_extra_seams { 1.0 / (1 + extra_seams - p.max_extra_seams) as f64 } else { 1.0 },
         ];
         let matching = Matching::of(shape_level, exemplar_level);
         let (copy_fscore, largest_change) = (matching.fscore(), matching.largest_change());
@@ -729,6 +765,9 @@ impl StructureScores {
         if unlike_share > p.max_unlike_share {
             flags.push(Flag::OutOfStyle);
         }
+        if extra_seams > p.max_extra_seams {
+            flags.push(Flag::Stepped);
+        }
         let moved_only = (copy_fscore < p.copy_fscore || largest_change >= p.copy_max_change)
             && (mass_ratio - 1.0).abs() <= p.moved_mass_slack
             && matching.moved_parts_only(p.moved_min_share);
@@ -749,7 +788,9 @@ impl StructureScores {
             hole_columns,
             sheet_axis,
             unlike_share,
+            extra_seams,
             fine_unlike_share: None,
+            coarse_copy_fscore: None,
             copy_fscore,
             largest_change,
             score: terms.iter().copied().fold(1.0, f64::min),
@@ -777,6 +818,23 @@ impl StructureScores {
             self.flags.insert(at, Flag::FineOutOfStyle);
         }
         self.fine_unlike_share = Some(share);
+        self
+    }
+
+    /// These scores with level 0 compared too: `shape0` (the variant's level
+    /// 0) against `exemplar0` (the exemplar's, in the same box). At or above
+    /// [`StructureParams::coarse_copy_fscore`] the shape is a near copy: its
+    /// arrangement is the exemplar's, whatever the finer levels changed.
+    /// Levels of different resolutions change nothing.
+    pub fn with_coarse(mut self, shape0: &Level, exemplar0: &Level, p: &StructureParams) -> Self {
+        if shape0.resolution != exemplar0.resolution || shape0.is_empty() {
+            return self;
+        }
+        let f = Matching::of(shape0, exemplar0).fscore();
+        self.coarse_copy_fscore = Some(f);
+        if f >= p.coarse_copy_fscore && !self.flags.contains(&Flag::NearCopy) {
+            self.flags.push(Flag::NearCopy);
+        }
         self
     }
 

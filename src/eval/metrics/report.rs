@@ -133,6 +133,9 @@ pub struct ShapeInput<'a> {
     /// For a variant sampled in a resized box: its extent and the exemplar's
     /// structure level at that extent ([`crate::level::resize::stretched`]).
     pub at_extent: Option<([f32; 3], &'a Level)>,
+    /// Its level 0 and the exemplar's, where it was sampled in the
+    /// exemplar's box and not bent ([`StructureScores::with_coarse`]).
+    pub level0: Option<(&'a Level, &'a Level)>,
     /// The level after the structure level (128^3) and the exemplar's same
     /// level to compare it with (bent where the variant was), if both exist
     /// ([`StructureScores::with_fine`]).
@@ -227,7 +230,11 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
                     Some(StructureScores::at_extent(vl, &Structure::of(vl), (at, &Structure::of(at)), (el, es), &params.structure))
                 }
                 (Some((el, es)), Some(vl), _) if vl.resolution == el.resolution => {
-                    Some(StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure))
+                    let s = StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure);
+                    Some(match v.level0 {
+                        Some((l0, e0)) => s.with_coarse(l0, e0, &params.structure),
+                        None => s,
+                    })
                 }
                 _ => None,
             }
@@ -393,13 +400,24 @@ impl EvalReport {
                 st.near_copies,
                 r = st.resolution
             );
+            let resized = self.variants.iter().filter(|v| v.extent.is_some()).count();
+            if resized > 0 {
+                s += &format!("{resized} of {} sampled in a resized box (extent), as the networks drew only copies in the exemplar's box\n", st.scored);
+            }
+            if st.near_copies * 3 >= st.scored.max(1) {
+                s += &format!(
+                    "{} of {} are near copies: the networks draw again what the exemplar has only once (a single building). \
+                     Try --set sample.resize_max=1.75 (variants in longer boxes), --extent, or an exemplar with its parts repeated\n",
+                    st.near_copies, st.scored
+                );
+            }
         }
         s += "LP: the variant's 11^3 patches best-matched in the exemplar; cover: the exemplar's matched in the variant\n";
         s += "(22: on the half-resolution lattice); detail: neighbour-normal angles vs the exemplar's (W1, RMS ratio);\n";
         s += "colour: colour patches matched both ways (F-score, coverage; n/a: a one-colour exemplar); chamfer0: level-0 points,\n";
         s += "normalised units; struct: the shape as a whole vs the exemplar at the structure level (1 = its structure),\n";
         s += "flags: fragment, shrunken, pieces, torn, open, seen_through, thin_part_lost, holed, out_of_style,\n";
-        s += "fine_out_of_style (the out-of-style share on the level after, 128^3) (not whole), near_copy\n";
+        s += "fine_out_of_style (the out-of-style share on the level after, 128^3), stepped (not whole), near_copy\n";
         if self.variants.iter().any(|v| v.bent) {
             s += "(bent): the exemplar bent; seen_through and the out-of-style flags are judged against the exemplar bent the same way\n";
         }
@@ -497,7 +515,7 @@ mod tests {
         let shifted = vec![Vec3::new(0.0, 0.1, 0.0), Vec3::new(1.0, 0.1, 0.0)];
         let (exh, v1h, parth) = (halve(&ex), halve(&v1), halve(&part));
         let (lex, lv1, lpart) = (level_of(&ex), level_of(&v1), level_of(&part));
-        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None, bent_reference: None, at_extent: None, fine_level: None };
+        let shape = |name: &str, o, h, l, c| ShapeInput { name: name.into(), occupancy: o, occupancy_22: h, finest: l, coarse_points: c, structure_level: None, bent_reference: None, at_extent: None, level0: None, fine_level: None };
         let r = evaluate(
             &shape("exemplar", &ex, &exh, &lex, Some(&pts)),
             &[
@@ -530,13 +548,13 @@ mod tests {
         let full = Occupancy { bits: full.bits.iter().map(|&w| w & last_word_mask(16)).collect(), ..full };
         let empty = Occupancy::empty(ex.dims);
         let l = level_of(&ex);
-        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None, bent_reference: None, at_extent: None, fine_level: None };
+        let shape = |o| ShapeInput { name: "v".into(), occupancy: o, occupancy_22: o, finest: &l, coarse_points: None, structure_level: None, bent_reference: None, at_extent: None, level0: None, fine_level: None };
         assert!(matches!(check_shape(&shape(&empty)), Err(DegenerateShape::NoSurface(_))));
         let e = check_shape(&shape(&full)).unwrap_err();
         assert!(matches!(e, DegenerateShape::Filled(..)) && e.to_string().contains("fills 100%"), "{e}");
         assert!(check_shape(&shape(&ex)).is_ok());
         let empty_level = Level { resolution: 16, ..Default::default() };
-        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None, bent_reference: None, at_extent: None, fine_level: None };
+        let s = ShapeInput { name: "v".into(), occupancy: &ex, occupancy_22: &ex, finest: &empty_level, coarse_points: None, structure_level: None, bent_reference: None, at_extent: None, level0: None, fine_level: None };
         assert!(matches!(check_shape(&s), Err(DegenerateShape::EmptyLevel(_))));
     }
 }
