@@ -835,6 +835,13 @@ mod tests {
         let e = paper.with_overrides(&["sample.final_step=halfway".into()]).unwrap_err().to_string();
         assert!(e.contains("final_step") || e.contains("halfway"), "{e}");
         assert!(paper.with_overrides(&["sample.attempts=0".into()]).is_err());
+        // resize_max: 0 (never) or a factor of at least the smallest resize.
+        assert_eq!(paper.sample.resize_max, 0.0);
+        assert_eq!(paper.with_overrides(&["sample.resize_max=1.75".into()]).unwrap().sample.resize_max, 1.75);
+        for bad in ["1.1", "5", "-1"] {
+            let e = paper.with_overrides(&[format!("sample.resize_max={bad}")]).unwrap_err().to_string();
+            assert!(e.contains("resize_max"), "{e}");
+        }
     }
 
     #[test]

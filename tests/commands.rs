@@ -145,6 +145,33 @@ fn sample_takes_a_run_folder_and_a_failed_sample_leaves_no_folder() {
 }
 
 #[test]
+fn a_resized_variant_records_its_extent_and_eval_judges_it_at_that_extent() {
+    let run = tiny_trained_run();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("long");
+    let o = shapeshifter(&["-q", "sample", run.to_str().unwrap(), "-n", "1", "--extent", "1.5,1,1", "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let record: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("variant_000/extent.json")).unwrap()).unwrap();
+    assert_eq!(record["extent"], serde_json::json!([1.5, 1.0, 1.0]));
+    let report = dir.path().join("eval.json");
+    let o = shapeshifter(&["eval", run.join("exemplar").to_str().unwrap(), out.join("variant_000").to_str().unwrap(), "-o", report.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("(extent 1.5,1,1)"), "{}", String::from_utf8_lossy(&o.stdout));
+    let scores: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(scores["variants"][0]["extent"], serde_json::json!([1.5, 1.0, 1.0]));
+    // In the exemplar's box no record is written, and a stale one goes.
+    let o = shapeshifter(&["-q", "sample", run.to_str().unwrap(), "-n", "1", "--seed", "9", "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join("variant_000/extent.json").exists());
+    // A broken record is a one-line error naming it, exit 1.
+    std::fs::write(out.join("variant_000/extent.json"), "{\"extent\": [0, 1, 1]}").unwrap();
+    let o = shapeshifter(&["eval", run.join("exemplar").to_str().unwrap(), out.join("variant_000").to_str().unwrap(), "-o", report.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("extent.json") && e.contains("positive") && e.trim().lines().count() == 1, "{e}");
+}
+
+#[test]
 fn batch_run_skips_a_corrupt_input_and_fails_overall() {
     let dir = tempfile::tempdir().unwrap();
     let good = small_tower_ply(dir.path());
