@@ -438,7 +438,9 @@ pub struct StructureParams {
     /// place and found again, the same shape, in another), with as much
     /// surface as the exemplar (within `moved_mass_slack`), is a near copy
     /// too: the exemplar with one building shifted, where a doubled
-    /// courtyard adds surface and is new.
+    /// courtyard adds surface and is new. 0.04, as `copy_max_change`: a
+    /// window moved along a longer house (1-2% of its surface) is a new
+    /// arrangement, a building moved is not.
     pub moved_min_share: f64,
     pub moved_mass_slack: f64,
     /// Boundary F-score (1-voxel tolerance) at level 0 (16^3) at or above
@@ -503,7 +505,7 @@ impl Default for StructureParams {
             min_enclosure_ratio: 0.85,
             copy_fscore: 0.95,
             copy_max_change: 0.04,
-            moved_min_share: 0.01,
+            moved_min_share: 0.04,
             moved_mass_slack: 0.06,
             coarse_copy_fscore: 0.998,
             max_seen_through_excess: 0.02,
