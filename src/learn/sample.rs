@@ -965,7 +965,7 @@ impl OneVariant<'_> {
                         "; for a figure with nothing repeated in it (a statue, an animal), --set sample.bend_voxels=2 poses it anew"
                     }
                     Bending::NotAFigure if opts.resize_max == 0.0 => {
-                        "; the networks copy what appears once in the exemplar: --set sample.resize_max=1.75 draws resized boxes instead (a longer house), or try --extent"
+                        "; the networks copy what appears once in the exemplar: --set sample.resize_max=1.5 draws longer boxes instead (a longer house), or try --extent"
                     }
                     _ => "",
                 }
