@@ -76,8 +76,12 @@ pub struct Models {
     pub diffusion: Vec<LevelNet<DiffusionNet>>,
     /// Upsampler of each level (`None` at level 0). With one level loaded,
     /// level 1's where it is trained: the level-0 choice uses it
-    /// ([`ThinAtLevel1`]).
+    /// ([`AtExtent::thin_ratio`]).
     pub upsamplers: Vec<Option<LevelNet<Upsampler>>>,
+    /// Resized passes these networks made, and how many were whole at the
+    /// structure level: after [`RESIZE_TRIES`] with none whole, they cannot
+    /// fill a longer box and later variants are not resized.
+    pub resized_passes: std::sync::Mutex<(usize, usize)>,
 }
 
 impl Models {
@@ -126,7 +130,7 @@ pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -
         u.load(&p)?;
         upsamplers.push(Some(u));
     }
-    Ok(Models { config: config.clone(), device, diffusion, upsamplers })
+    Ok(Models { config: config.clone(), device, diffusion, upsamplers, resized_passes: Default::default() })
 }
 
 /// Refuses a level whose recorded training parameterisation is not this
@@ -161,7 +165,7 @@ pub fn untrained_models(config: &Config, levels: usize, device: Device, seed: u6
         diffusion.push(new_diffusion(&config.model, l, device)?);
         upsamplers.push(if l == 0 { None } else { Some(new_upsampler(&config.model, device)?) });
     }
-    Ok(Models { config: config.clone(), device, diffusion, upsamplers })
+    Ok(Models { config: config.clone(), device, diffusion, upsamplers, resized_passes: Default::default() })
 }
 
 /// What to sample.
@@ -331,6 +335,7 @@ pub fn sample_observed(
         crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)))
     };
     let copies_only = std::cell::Cell::new(false);
+    let resized_whole = std::cell::Cell::new(false);
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
     let bending = Bending::of(opts, exemplar_levels, from.is_some());
     let resizing = opts.resize_max > 0.0 && could_bend(opts) && !continuing && !matches!(bending, Bending::Bends(_));
@@ -338,6 +343,7 @@ pub fn sample_observed(
         (opts.first..opts.first + opts.n)
             .map(|i| {
                 copies_only.set(false);
+                resized_whole.set(false);
                 let job = OneVariant {
                     models,
                     exemplar_levels,
@@ -351,6 +357,7 @@ pub fn sample_observed(
                     repairs: &repairs,
                     bending,
                     copies_only: &copies_only,
+                    resized_whole: &resized_whole,
                     resizing,
                     told: sink.map(|f| (i, f)),
                 };
@@ -400,6 +407,10 @@ struct OneVariant<'a> {
     /// Set once a pass of this variant found its level-0 candidates none new
     /// enough and resized: its later attempts start resized at once.
     copies_only: &'a std::cell::Cell<bool>,
+    /// Whether a resized pass of this variant was whole: if none was, its
+    /// last attempt takes the exemplar's box (a whole copy before a broken
+    /// shape).
+    resized_whole: &'a std::cell::Cell<bool>,
     /// Whether a pass whose level-0 candidates are none new enough is
     /// resized (`resize_max`, not bent, the novel pick in the exemplar's box).
     resizing: bool,
@@ -610,6 +621,17 @@ fn could_bend(opts: &SampleOptions) -> bool {
     opts.level0_pick == crate::config::Level0Pick::Novel && opts.level0_candidates > 1 && opts.extent == [1.0; 3]
 }
 
+/// Resized passes that may all fail (none whole at the structure level)
+/// before sampling stops resizing for the networks that made them: a
+/// church's networks, trained on one nave and one steeple, broke every
+/// longer box, where a house's and a temple's filled most.
+pub const RESIZE_TRIES: usize = 6;
+
+/// Level-0 candidates drawn at most in a resized box (the first that passes
+/// is kept): on the house and the temple one of the first 12 passed every
+/// time one did.
+pub const RESIZED_CANDIDATES: usize = 12;
+
 /// How a pass starts: a level-0 shape drawn by the network (its pruned
 /// tensor and level), the exemplar bent, or a box resized.
 enum Start {
@@ -649,7 +671,7 @@ enum Kept {
     /// exemplar (lowest F-score, then the largest changed region).
     LeastLike { fscore: f64, change: f64 },
     /// None passed: the best scoring.
-    BestScoring { score: f64 },
+    BestScoring { score: f64, fscore: f64 },
 }
 
 /// What an offered candidate means for the pick.
@@ -671,14 +693,14 @@ struct Offer {
 /// tips, 13 of 16 voxels, scores 0.81 and is "new" to the F-score; the finer
 /// levels shred the stubs) and keeps the exemplar's thin parts
 /// (`thin_part_lost` at 16^3, and its thin voxels counted again one level
-/// finer, [`ThinAtLevel1`]: a bunny whose back ear is gone inside the box is
+/// finer, [`AtExtent::thin_ratio`]: a bunny whose back ear is gone inside the box is
 /// "new" too, F 0.97, and no finer level regrows the ear; docs/results.md,
 /// "New shapes" and "Thin parts at level 0").
 struct Level0Pick {
     novel: bool,
     min_structure: f64,
     /// (score, k) of the best scoring.
-    best: Option<(f64, usize)>,
+    best: Option<(f64, usize, f64)>,
     /// ((F-score, -change), k) of the least like the exemplar that passed.
     newest: Option<((f64, f64), usize)>,
     /// The `first` pick's candidate, once one passed.
@@ -700,8 +722,8 @@ impl Level0Pick {
     fn offer(&mut self, k: usize, score: f64, part_lost: bool, likeness: (f64, f64)) -> Offer {
         let pass = self.passes(score, part_lost);
         let mut offer = Offer { best: false, picked: false, stop: false };
-        if self.best.is_none_or(|(b, _)| score > b) {
-            self.best = Some((score, k));
+        if self.best.is_none_or(|(b, _, _)| score > b) {
+            self.best = Some((score, k, likeness.0));
             offer.best = true;
         }
         if pass && self.novel {
@@ -730,7 +752,7 @@ impl Level0Pick {
             let change = -change;
             return Some((k, if fscore < NEW_ENOUGH_LEVEL0_FSCORE { Kept::NewEnough { fscore, change } } else { Kept::LeastLike { fscore, change } }));
         }
-        self.best.map(|(score, k)| (k, Kept::BestScoring { score }))
+        self.best.map(|(score, k, fscore)| (k, Kept::BestScoring { score, fscore }))
     }
 }
 
@@ -772,15 +794,16 @@ impl OneVariant<'_> {
     /// first candidate that passes against the exemplar at its extent: the
     /// size is what is new.
     fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<Start> {
-        if self.resizing && self.copies_only.get() {
+        if self.resizes() && self.copies_only.get() {
             if let Some(extent) = self.drawn_extent(seed, opts) {
                 return Ok(Start::Resized(extent));
             }
         }
         let (ex_level, ex_structure) = (&self.at.level0, &self.at.structure0);
         let params = structure_params();
-        let candidates = opts.level0_candidates.max(1);
-        let policy = if self.at.extent.is_same() { opts.level0_pick } else { crate::config::Level0Pick::First };
+        let resized = !self.at.extent.is_same();
+        let candidates = if resized { opts.level0_candidates.clamp(1, RESIZED_CANDIDATES) } else { opts.level0_candidates.max(1) };
+        let policy = if resized { crate::config::Level0Pick::First } else { opts.level0_pick };
         let mut pick = Level0Pick::new(policy, opts.level0_min_structure);
         // The candidates the pick may still keep: the best scoring (the
         // fallback) and its pick so far.
@@ -820,10 +843,21 @@ impl OneVariant<'_> {
                 log::info!("level 0: none of {candidates} candidates new enough: the exemplar bent instead (seed {})", bend.seed);
                 return Ok(Start::Bent(bend));
             }
-            if let Some(extent) = self.resizing.then(|| self.drawn_extent(seed, opts)).flatten() {
+            // Resized only where the networks draw the exemplar itself (the
+            // tower's least-like starts, F 0.985-0.995, became towers of
+            // their own at the finer levels; a single house's read 1.000).
+            let copy = match why {
+                Kept::LeastLike { fscore, .. } | Kept::BestScoring { fscore, .. } => fscore >= params.coarse_copy_fscore,
+                _ => false,
+            };
+            if let Some(extent) = (copy && self.resizes()).then(|| self.drawn_extent(seed, opts)).flatten() {
                 self.copies_only.set(true);
                 log::info!(
-                    "level 0: none of {candidates} candidates new enough (the networks copy the exemplar): resized to extent {} instead",
+                    "level 0: none of {candidates} candidates new enough (the networks draw the exemplar: F {:.3} at best): resized to extent {} instead",
+                    match why {
+                        Kept::LeastLike { fscore, .. } | Kept::BestScoring { fscore, .. } => fscore,
+                        _ => 1.0,
+                    },
                     extent.extent.map(|e| e.to_string()).join(",")
                 );
                 return Ok(Start::Resized(extent));
@@ -836,7 +870,7 @@ impl OneVariant<'_> {
                 let how = if matches!(why, Kept::NewEnough { .. }) { "new enough" } else { "the least like the exemplar of all" };
                 log::info!("level 0: candidate {k} of {candidates} kept, {how} (F {fscore:.3}, change {change:.3} against the exemplar's level 0)");
             }
-            Kept::BestScoring { score } => log::warn!(
+            Kept::BestScoring { score, .. } => log::warn!(
                 "level 0: none of {candidates} candidates passed (structure {:.2}, not cut short): the best ({score:.3}) is kept",
                 opts.level0_min_structure
             ),
@@ -847,7 +881,7 @@ impl OneVariant<'_> {
     }
 
     /// The thin-part voxels of level-0 candidate `x` taken to level 1 by the
-    /// upsampler alone, over the exemplar's level 1 ([`ThinAtLevel1`]); None
+    /// upsampler alone, over the exemplar's level 1 ([`AtExtent::thin_ratio`]); None
     /// where the exemplar has no thin parts to lose there.
     fn thin_ratio_at_level1(&self, x: &SparseTensor) -> Result<Option<f64>> {
         let (Some(_), Some(Some(up))) = (&self.at.thin1, self.models.upsamplers.get(1)) else {
@@ -900,6 +934,14 @@ impl OneVariant<'_> {
         p.resized.as_ref().map(|r| r.extent).or((!self.at.extent.is_same()).then_some(self.at.extent))
     }
 
+    /// Whether a pass with nothing new at level 0 is resized: resizing is on
+    /// and these networks have not failed [`RESIZE_TRIES`] times with no
+    /// whole resized pass.
+    fn resizes(&self) -> bool {
+        let (passes, whole) = *self.models.resized_passes.lock().unwrap_or_else(|e| e.into_inner());
+        self.resizing && (whole > 0 || passes < RESIZE_TRIES)
+    }
+
     /// A resized pass's extent from the pass's level-0 seed, where
     /// `resize_max` allows one ([`Extent::drawn`]).
     fn drawn_extent(&self, seed: u64, opts: &SampleOptions) -> Option<Extent> {
@@ -936,9 +978,16 @@ impl OneVariant<'_> {
         // once it is kept.
         let quiet = OneVariant { told: None, ..*self };
         let (a, rank, kept) = keep_attempt(attempts, opts.reject_copies, |a| {
-            let p = quiet.pass(attempt_seed(self.seed, a), resolution0, opts, None, structure_index)?;
+            // The last attempt of a variant none of whose resized passes was
+            // whole takes the exemplar's box.
+            let last_in_box = a + 1 == attempts && a > 0 && self.copies_only.get() && !self.resized_whole.get();
+            let p = if last_in_box {
+                OneVariant { resizing: false, ..quiet }.pass(attempt_seed(self.seed, a), resolution0, opts, None, structure_index)?
+            } else {
+                quiet.pass(attempt_seed(self.seed, a), resolution0, opts, None, structure_index)?
+            };
             let level = &p.levels[structure_index];
-            let rank = match self.judged(&p, level).filter(|_| !level.is_empty()) {
+            let mut rank = match self.judged(&p, level).filter(|_| !level.is_empty()) {
                 None => AttemptRank { whole: false, new: false, score: 0.0 },
                 Some(s) => {
                     let how = match (&p.bend, &p.resized) {
@@ -950,6 +999,20 @@ impl OneVariant<'_> {
                     AttemptRank { whole: s.whole(), new: !s.flags.contains(&Flag::NearCopy), score: s.score }
                 }
             };
+            if p.resized.is_some() {
+                self.resized_whole.set(self.resized_whole.get() || rank.whole);
+                let mut record = self.models.resized_passes.lock().unwrap_or_else(|e| e.into_inner());
+                *record = (record.0 + 1, record.1 + rank.whole as usize);
+                if record.0 == RESIZE_TRIES && record.1 == 0 {
+                    log::warn!("{RESIZE_TRIES} resized passes, none whole: these networks cannot fill a longer box; variants stay in the exemplar's box");
+                }
+            }
+            // Once resizing has failed, the networks offer nothing new in any
+            // box: a whole copy ends the search (more attempts would draw
+            // more copies, minutes each); eval still calls it a near copy.
+            if self.resizing && !self.resizes() && p.resized.is_none() && rank.whole {
+                rank.new = true;
+            }
             Ok((rank, p))
         })?;
         let res = self.exemplar_levels[structure_index].resolution;
@@ -1242,7 +1305,7 @@ mod tests {
     fn when_nothing_passes_the_best_scoring_is_kept() {
         let c = [(0.5, false, 0.9, 0.1), (0.95, true, 0.9, 0.1), (0.7, false, 0.9, 0.1)];
         for pick in [Pick::First, Pick::Novel] {
-            assert_eq!(run_pick(pick, 0.8, &c), (3, Some((1, Kept::BestScoring { score: 0.95 }))), "{pick:?}");
+            assert_eq!(run_pick(pick, 0.8, &c), (3, Some((1, Kept::BestScoring { score: 0.95, fscore: 0.9 }))), "{pick:?}");
         }
         assert_eq!(Level0Pick::new(Pick::Novel, 0.8).kept(), None);
     }
