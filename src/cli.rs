@@ -1095,7 +1095,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Compare { a, b } => {
             let report = shapeshifter::io::dataset::compare_levels(&a, &b)?;
-            println!("{} level files compared: {} identical", report.compared, report.compared - report.differences.len());
+            println!("{} level files compared: {} identical", report.compared, report.identical());
             for d in &report.differences {
                 println!("  differs: {d}");
             }

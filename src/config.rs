@@ -372,7 +372,7 @@ pub struct SampleConfig {
     /// With `level0_pick = novel`, `level0_candidates` > 1 and the
     /// exemplar's box: where none of a pass's level-0 candidates is new
     /// enough and the exemplar is not bent (a building, a part, a terrain),
-    /// the pass starts instead from a level-0 box resized along one
+    /// the pass starts instead from a level-0 box resized along its longer
     /// horizontal axis by a factor in [1.25, `resize_max`] (the paper's
     /// resize, `level::resize`): the networks fill a longer box in their own
     /// way (a house with more windows), where in the exemplar's box they

@@ -95,42 +95,8 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     let mesh_path = dir.join("mesh.ply");
     let mesh = if mesh_path.is_file() { Some(mesh::load(&mesh_path)?) } else { None };
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let bend = read_bend(dir)?;
-    let extent = read_extent(dir)?;
+    let crate::io::dataset::StartRecord { bend, extent } = crate::io::dataset::StartRecord::read(dir)?;
     Ok(VariantFiles { name, finest, coarsest, structure, fine, mesh, bend, extent })
-}
-
-/// A variant folder's extent record ([`crate::level::resize::EXTENT_FILE`]),
-/// if there is one; a record that is not one, or an extent that is not
-/// positive and finite, is an error naming the file.
-pub fn read_extent(dir: &Path) -> Result<Option<crate::level::resize::Extent>> {
-    let path = dir.join(crate::level::resize::EXTENT_FILE);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
-    let extent: crate::level::resize::Extent = serde_json::from_str(&text)
-        .map_err(|e| Error::file(&path, format!("not an extent record: {}", crate::error::one_line(&e.to_string()))))?;
-    if extent.extent.iter().any(|e| !(e.is_finite() && *e > 0.0)) {
-        return Err(Error::file(&path, format!("extent {:?}: each scale must be a positive number", extent.extent)));
-    }
-    Ok(Some(extent).filter(|e| !e.is_same()))
-}
-
-/// A variant folder's bend record ([`crate::level::warp::BEND_FILE`]), if
-/// it has one; one that does not parse is an error naming the file.
-pub fn read_bend(dir: &Path) -> Result<Option<crate::level::warp::Bend>> {
-    let path = dir.join(crate::level::warp::BEND_FILE);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
-    let bend: crate::level::warp::Bend = serde_json::from_str(&text)
-        .map_err(|e| Error::file(&path, format!("not a bend record: {}", crate::error::one_line(&e.to_string()))))?;
-    if !(bend.voxels.is_finite() && (0.0..=crate::level::warp::MAX_BEND_VOXELS).contains(&(bend.voxels as f64))) {
-        return Err(Error::file(&path, format!("bend of {} voxels: a bend is 0 to {} level-0 voxels", bend.voxels, crate::level::warp::MAX_BEND_VOXELS)));
-    }
-    Ok(Some(bend))
 }
 
 fn points_normalised(level: &Level) -> Vec<Vec3> {
@@ -366,25 +332,4 @@ pub fn evaluate(
     }
     let report = metrics::evaluate(&exemplar, &inputs, &EvalParams::default())?;
     Ok(Evaluation { lattice: Lattice { voxelisation: mode, filled, dims: grid.dims, voxel: grid.voxel }, unscored, report })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_bend_record_is_read_when_there_and_a_broken_one_is_an_error_naming_it() {
-        let dir = tempfile::tempdir().unwrap();
-        assert_eq!(read_bend(dir.path()).unwrap(), None);
-        let bend = crate::level::warp::Bend { seed: 42, voxels: 2.0 };
-        let path = dir.path().join(crate::level::warp::BEND_FILE);
-        std::fs::write(&path, serde_json::to_string(&bend).unwrap()).unwrap();
-        assert_eq!(read_bend(dir.path()).unwrap(), Some(bend));
-        std::fs::write(&path, "{\"seed\": 42").unwrap();
-        let e = read_bend(dir.path()).unwrap_err().to_string();
-        assert!(e.contains("bend.json") && e.contains("not a bend record") && !e.contains('\n'), "{e}");
-        std::fs::write(&path, "{\"seed\": 42, \"voxels\": 1e38}").unwrap();
-        let e = read_bend(dir.path()).unwrap_err().to_string();
-        assert!(e.contains("bend.json") && e.contains("0 to 4"), "{e}");
-    }
 }

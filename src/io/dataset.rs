@@ -164,6 +164,15 @@ pub struct LevelComparison {
     pub compared: usize,
     /// One line per file that is missing from the second folder or differs.
     pub differences: Vec<String>,
+    /// Level files under the second folder only.
+    pub only_in_b: usize,
+}
+
+impl LevelComparison {
+    /// Files of the first folder found the same in the second.
+    pub fn identical(&self) -> usize {
+        self.compared - (self.differences.len() - self.only_in_b)
+    }
 }
 
 /// Every `level_K.vdb` under `a` (recursively) against the file at the same
@@ -218,6 +227,7 @@ pub fn compare_levels(a: &Path, b: &Path) -> Result<LevelComparison> {
     for fb in in_b {
         let rel = fb.strip_prefix(b).unwrap_or(&fb).to_path_buf();
         if !a.join(&rel).is_file() {
+            report.only_in_b += 1;
             report.differences.push(format!("{}: only in {}", rel.display(), b.display()));
         }
     }
@@ -249,4 +259,133 @@ pub fn write_variant(dir: &Path, levels: &[Level], provenance: &Provenance, prev
         }
     }
     Ok(())
+}
+
+/// What a variant folder records of how its start was made, beside its
+/// levels: the bend of a bent variant ([`crate::level::warp::BEND_FILE`])
+/// and the extent of one sampled in a resized box
+/// ([`crate::level::resize::EXTENT_FILE`]). Eval and the studio judge a
+/// variant against the exemplar made the same way.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StartRecord {
+    pub bend: Option<crate::level::warp::Bend>,
+    pub extent: Option<crate::level::resize::Extent>,
+}
+
+impl StartRecord {
+    /// Reads a variant folder's records; none is the exemplar's own start. A
+    /// record that does not parse, or whose values are out of range, is an
+    /// error naming its file.
+    pub fn read(dir: &Path) -> Result<Self> {
+        let bend: Option<crate::level::warp::Bend> = read_record(dir, crate::level::warp::BEND_FILE, "a bend record")?;
+        if let Some(b) = bend {
+            let max = crate::level::warp::MAX_BEND_VOXELS;
+            if !(b.voxels.is_finite() && (0.0..=max).contains(&(b.voxels as f64))) {
+                let path = dir.join(crate::level::warp::BEND_FILE);
+                return Err(Error::file(&path, format!("bend of {} voxels: a bend is 0 to {max} level-0 voxels", b.voxels)));
+            }
+        }
+        let extent: Option<crate::level::resize::Extent> = read_record(dir, crate::level::resize::EXTENT_FILE, "an extent record")?;
+        if let Some(e) = extent {
+            if e.extent.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                let path = dir.join(crate::level::resize::EXTENT_FILE);
+                return Err(Error::file(&path, format!("extent {}: each scale must be a positive number", e)));
+            }
+        }
+        Ok(Self { bend, extent: extent.filter(|e| !e.is_same()) })
+    }
+
+    /// Writes the records into a variant folder, and removes a stale one
+    /// where this start has none.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        write_record(dir, crate::level::warp::BEND_FILE, self.bend.as_ref())?;
+        write_record(dir, crate::level::resize::EXTENT_FILE, self.extent.as_ref())
+    }
+}
+
+/// A JSON record `file` in `dir`, if there is one; one that does not parse
+/// as `what` is an error naming the file.
+fn read_record<T: serde::de::DeserializeOwned>(dir: &Path, file: &str, what: &str) -> Result<Option<T>> {
+    let path = dir.join(file);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, e.to_string()))?;
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| Error::file(&path, format!("not {what}: {}", crate::error::one_line(&e.to_string()))))
+}
+
+/// Writes `record` as JSON `file` in `dir`, or removes a stale file where
+/// there is no record.
+fn write_record<T: Serialize>(dir: &Path, file: &str, record: Option<&T>) -> Result<()> {
+    let path = dir.join(file);
+    match record {
+        Some(r) => {
+            let text = serde_json::to_string_pretty(r).map_err(|e| Error::file(&path, e.to_string()))?;
+            write_file(&path, text.as_bytes())
+        }
+        None if path.exists() => std::fs::remove_file(&path).map_err(|e| Error::file(&path, e.to_string())),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod start_record_tests {
+    use super::*;
+    use crate::level::resize::{Extent, EXTENT_FILE};
+    use crate::level::warp::{Bend, BEND_FILE};
+
+    #[test]
+    fn start_records_round_trip_a_stale_one_is_removed_and_a_broken_one_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(StartRecord::read(dir.path()).unwrap(), StartRecord::default());
+        let made = StartRecord { bend: Some(Bend { seed: 42, voxels: 2.0 }), extent: Some(Extent { extent: [1.5, 1.0, 1.0] }) };
+        made.write(dir.path()).unwrap();
+        assert_eq!(StartRecord::read(dir.path()).unwrap(), made);
+        // Written again without records: the stale files go.
+        StartRecord::default().write(dir.path()).unwrap();
+        assert!(!dir.path().join(BEND_FILE).exists() && !dir.path().join(EXTENT_FILE).exists());
+        // The exemplar's own extent reads as none.
+        std::fs::write(dir.path().join(EXTENT_FILE), "{\"extent\": [1, 1, 1]}").unwrap();
+        assert_eq!(StartRecord::read(dir.path()).unwrap().extent, None);
+        for (file, text, says) in [
+            (BEND_FILE, "{\"seed\": 42", "not a bend record"),
+            (BEND_FILE, "{\"seed\": 42, \"voxels\": 1e38}", "0 to 4"),
+            (EXTENT_FILE, "[1.5]", "not an extent record"),
+            (EXTENT_FILE, "{\"extent\": [1.5, -1, 1]}", "positive number"),
+        ] {
+            let other = if file == BEND_FILE { EXTENT_FILE } else { BEND_FILE };
+            let _ = std::fs::remove_file(dir.path().join(other));
+            std::fs::write(dir.path().join(file), text).unwrap();
+            let e = StartRecord::read(dir.path()).unwrap_err().to_string();
+            assert!(e.contains(file) && e.contains(says) && !e.contains('\n'), "{e}");
+            std::fs::remove_file(dir.path().join(file)).unwrap();
+        }
+    }
+}
+
+#[cfg(test)]
+mod compare_tests {
+    use super::*;
+
+    #[test]
+    fn compare_counts_identical_files_of_the_first_folder_whatever_the_second_adds() {
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let level = crate::testing::synthetic::sphere_levels(&[16], glam::DVec3::ZERO, 0.5).remove(0);
+        let write = |dir: &Path, k: usize| {
+            vdb::write_level(&dir.join(level_file_name(k)), &level, &Provenance::default(), WriteOptions::default()).unwrap()
+        };
+        write(a.path(), 0);
+        write(b.path(), 0);
+        for k in 1..4 {
+            write(b.path(), k);
+        }
+        let r = compare_levels(a.path(), b.path()).unwrap();
+        assert_eq!((r.compared, r.identical(), r.only_in_b, r.differences.len()), (1, 1, 3, 3));
+        // A file missing from the second folder is not identical.
+        write(a.path(), 5);
+        let r = compare_levels(a.path(), b.path()).unwrap();
+        assert_eq!((r.compared, r.identical()), (2, 1));
+    }
 }

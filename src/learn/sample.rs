@@ -55,7 +55,7 @@ use tch::{Device, Kind, Tensor};
 
 use crate::config::{BendExemplars, Config};
 use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Schedule, TRAINING_PARAMETERISATION};
-use crate::level::structure::{thin_count, Flag, Structure, StructureParams, StructureScores};
+use crate::level::structure::{thin_count, Against, Flag, Structure, StructureParams, StructureScores};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
 use crate::level::repair::LevelRepair;
@@ -219,7 +219,7 @@ pub struct SampleOptions {
     pub bend_exemplars: BendExemplars,
     /// A pass whose level-0 candidates are none new enough, where the
     /// exemplar is not bent, starts instead from a level-0 box resized along
-    /// one horizontal axis by up to this factor (`sample.resize_max`,
+    /// the exemplar's longer horizontal axis by up to this factor (`sample.resize_max`,
     /// [`crate::level::resize::Extent::drawn`]; 0: never). Not written when 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub resize_max: f64,
@@ -538,13 +538,6 @@ impl AtExtent {
     }
 }
 
-/// The structural thresholds sampling compares with the exemplar: at any
-/// extent the same, since a resized pass is judged against the exemplar at
-/// its extent ([`AtExtent`]).
-fn structure_params() -> StructureParams {
-    StructureParams::default()
-}
-
 /// How one coarse-to-fine attempt came out at the structure level.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AttemptRank {
@@ -699,7 +692,7 @@ struct Offer {
 struct Level0Pick {
     novel: bool,
     min_structure: f64,
-    /// (score, k) of the best scoring.
+    /// (score, k, F-score against the exemplar) of the best scoring.
     best: Option<(f64, usize, f64)>,
     /// ((F-score, -change), k) of the least like the exemplar that passed.
     newest: Option<((f64, f64), usize)>,
@@ -800,7 +793,7 @@ impl OneVariant<'_> {
             }
         }
         let (ex_level, ex_structure) = (&self.at.level0, &self.at.structure0);
-        let params = structure_params();
+        let params = StructureParams::default();
         let resized = !self.at.extent.is_same();
         let candidates = if resized { opts.level0_candidates.clamp(1, RESIZED_CANDIDATES) } else { opts.level0_candidates.max(1) };
         let policy = if resized { crate::config::Level0Pick::First } else { opts.level0_pick };
@@ -846,19 +839,14 @@ impl OneVariant<'_> {
             // Resized only where the networks draw the exemplar itself (the
             // tower's least-like starts, F 0.985-0.995, became towers of
             // their own at the finer levels; a single house's read 1.000).
-            let copy = match why {
-                Kept::LeastLike { fscore, .. } | Kept::BestScoring { fscore, .. } => fscore >= params.coarse_copy_fscore,
-                _ => false,
+            let copy_fscore = match why {
+                Kept::LeastLike { fscore, .. } | Kept::BestScoring { fscore, .. } => Some(fscore).filter(|&f| f >= params.coarse_copy_fscore),
+                _ => None,
             };
-            if let Some(extent) = (copy && self.resizes()).then(|| self.drawn_extent(seed, opts)).flatten() {
+            if let Some((fscore, extent)) = copy_fscore.filter(|_| self.resizes()).and_then(|f| Some((f, self.drawn_extent(seed, opts)?))) {
                 self.copies_only.set(true);
                 log::info!(
-                    "level 0: none of {candidates} candidates new enough (the networks draw the exemplar: F {:.3} at best): resized to extent {} instead",
-                    match why {
-                        Kept::LeastLike { fscore, .. } | Kept::BestScoring { fscore, .. } => fscore,
-                        _ => 1.0,
-                    },
-                    extent.extent.map(|e| e.to_string()).join(",")
+                    "level 0: none of {candidates} candidates new enough (the networks draw the exemplar: F {fscore:.3} at best): resized to extent {extent} instead"
                 );
                 return Ok(Start::Resized(extent));
             }
@@ -953,21 +941,20 @@ impl OneVariant<'_> {
     /// resized sampling, against the exemplar at its extent, its style
     /// against the exemplar's own patches; else against the exemplar.
     fn judged(&self, p: &Pass, level: &Level) -> Option<StructureScores> {
-        let params = structure_params();
-        let structure = Structure::of(level);
-        let style = self.style.or(self.at.reference());
-        let at = p.resized.as_ref().unwrap_or(self.at);
-        let (ex_level, ex_structure) = at.reference()?;
-        Some(match (&p.bend, &p.resized) {
-            // A bent pass's level is the exemplar's bent (and repaired): its own pose.
-            (Some(_), _) => StructureScores::against_bend(level, &structure, (level, &structure), ex_level, ex_structure, &params),
-            (None, Some(_)) => StructureScores::at_extent(level, &structure, (ex_level, ex_structure), style?, &params),
-            (None, None) => match self.style {
-                Some(style) => StructureScores::at_extent(level, &structure, (ex_level, ex_structure), style, &params),
-                // In the exemplar's box, a level 0 that is the exemplar's makes a near copy.
-                None => StructureScores::new(level, &structure, ex_level, ex_structure, &params).with_coarse(&p.levels[0], &self.at.level0, &params),
-            },
-        })
+        let own = self.style.or(self.at.reference())?;
+        let at = p.resized.as_ref().unwrap_or(self.at).reference()?;
+        // A bent pass's level is the exemplar's bent (and repaired): its own pose.
+        let structure;
+        let against = match (&p.bend, p.resized.is_some() || self.style.is_some()) {
+            (Some(_), _) => {
+                structure = Structure::of(level);
+                Against::Bent(level, &structure)
+            }
+            (None, true) => Against::AtExtent(at.0, at.1),
+            // In the exemplar's box, a level 0 that is the exemplar's makes a near copy.
+            (None, false) => Against::Exemplar { level0: Some((&p.levels[0], &self.at.level0)) },
+        };
+        Some(StructureScores::judged(level, own, against, None, &StructureParams::default()))
     }
 
     /// The pass [`keep_attempt`] keeps of `attempts`, its levels up to the
@@ -992,7 +979,7 @@ impl OneVariant<'_> {
                 Some(s) => {
                     let how = match (&p.bend, &p.resized) {
                         (Some(_), _) => " (bent)".to_string(),
-                        (None, Some(r)) => format!(" (extent {})", r.extent.extent.map(|e| e.to_string()).join(",")),
+                        (None, Some(r)) => format!(" (extent {})", r.extent),
                         _ => String::new(),
                     };
                     log::debug!("attempt {a}{how}: structure {:.3} {:?}", s.score, s.flags);
@@ -1320,7 +1307,7 @@ mod tests {
         let at = AtExtent::of(&levels, extent, None, false).unwrap();
         let (ref_level, ref_structure) = at.reference().expect("a structure level");
         assert_eq!(ref_level.index, 1);
-        let p = structure_params();
+        let p = StructureParams::default();
         let e = Structure::of(&exemplar);
         // The exemplar as long as the box: whole at its extent, and not the
         // exemplar's size.

@@ -77,6 +77,13 @@ impl Extent {
     }
 }
 
+impl std::fmt::Display for Extent {
+    /// "1.5,1,1": the per-axis scales as `--extent` takes them.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.extent.map(|e| e.to_string()).join(","))
+    }
+}
+
 /// The level-0 box of the exemplar resized by `extent` around its centre:
 /// `(min, size)` in voxels. An extent that is not positive, or whose box
 /// exceeds [`MAX_LEVEL0_BOX_CUBES`], is a usage error.
@@ -84,7 +91,7 @@ pub fn level0_box(level0: &Level, extent: [f32; 3]) -> Result<(IVec3, IVec3)> {
     let Some((lo, hi)) = bounds(level0) else {
         return Err(Error::Invalid("the exemplar's level 0 has no voxels".into()));
     };
-    let shown = extent.map(|e| e.to_string()).join(",");
+    let shown = Extent { extent };
     if extent.iter().any(|e| !(e.is_finite() && *e > 0.0)) {
         return Err(Error::Usage(format!("--extent {shown}: each scale must be a positive number")));
     }

@@ -865,6 +865,54 @@ impl StructureScores {
     }
 }
 
+/// What a shape's structure level is judged against, besides the exemplar's
+/// own level (its style).
+#[derive(Clone, Copy)]
+pub enum Against<'a> {
+    /// The exemplar in its own box; with level 0 (the shape's, the
+    /// exemplar's) where known: a level 0 that is the exemplar's makes a
+    /// near copy ([`StructureScores::with_coarse`]).
+    Exemplar { level0: Option<(&'a Level, &'a Level)> },
+    /// The exemplar bent as the shape's start was (its level bent, with its
+    /// structure): [`StructureScores::against_bend`].
+    Bent(&'a Level, &'a Structure),
+    /// The exemplar at the extent of the shape's resized box (its level
+    /// stretched, with its structure): [`StructureScores::at_extent`].
+    AtExtent(&'a Level, &'a Structure),
+}
+
+impl StructureScores {
+    /// The one verdict sampling, eval and the studio give a shape: its
+    /// structure level `shape` against `exemplar` (the exemplar's same level
+    /// and structure) made as the shape's start was (`against`), then, where
+    /// given, its fine level against the exemplar's (`fine`: the shape's, the
+    /// reference's, bent likewise; [`StructureScores::with_fine`]).
+    pub fn judged(
+        shape: &Level,
+        exemplar: (&Level, &Structure),
+        against: Against,
+        fine: Option<(&Level, &Level)>,
+        p: &StructureParams,
+    ) -> Self {
+        let s = Structure::of(shape);
+        let scores = match against {
+            Against::Bent(bent, b) => Self::against_bend(shape, &s, (bent, b), exemplar.0, exemplar.1, p),
+            Against::AtExtent(at, a) => Self::at_extent(shape, &s, (at, a), exemplar, p),
+            Against::Exemplar { level0 } => {
+                let scores = Self::new(shape, &s, exemplar.0, exemplar.1, p);
+                match level0 {
+                    Some((l0, e0)) => scores.with_coarse(l0, e0, p),
+                    None => scores,
+                }
+            }
+        };
+        match fine {
+            Some((f, reference)) => scores.with_fine(f, reference, p),
+            None => scores,
+        }
+    }
+}
+
 impl StructureScores {
     /// The scores of a shape sampled in a resized box
     /// ([`crate::level::resize`]): against the exemplar at that extent
@@ -998,12 +1046,15 @@ fn translated_alike(a: &[IVec3], b: &[IVec3]) -> bool {
     let centroid = |r: &[IVec3]| r.iter().fold(glam::DVec3::ZERO, |s, c| s + c.as_dvec3()) / r.len() as f64;
     let d = (centroid(b) - centroid(a)).round().as_ivec3();
     let moved: Vec<IVec3> = a.iter().map(|&c| c + d).collect();
-    let near = |from: &[IVec3], to: &[IVec3]| -> f64 {
-        let set: HashSet<IVec3> = to.iter().copied().collect();
-        let hit = from.iter().filter(|&&c| set.contains(&c) || NEIGHBOURS_26.iter().any(|&n| set.contains(&(c + n)))).count();
-        hit as f64 / from.len() as f64
-    };
-    near(&moved, b) >= MOVED_OVERLAP && near(b, &moved) >= MOVED_OVERLAP
+    let set = |r: &[IVec3]| -> HashSet<IVec3> { r.iter().copied().collect() };
+    let (sm, sb) = (set(&moved), set(b));
+    let near = |from: &HashSet<IVec3>, to: &HashSet<IVec3>| 1.0 - unmatched(from, to).len() as f64 / from.len() as f64;
+    near(&sm, &sb) >= MOVED_OVERLAP && near(&sb, &sm) >= MOVED_OVERLAP
+}
+
+/// The voxels of `from` with no voxel of `to` within 1 voxel (Chebyshev).
+fn unmatched(from: &HashSet<IVec3>, to: &HashSet<IVec3>) -> Vec<IVec3> {
+    from.iter().filter(|&&c| !(to.contains(&c) || NEIGHBOURS_26.iter().any(|&d| to.contains(&(c + d))))).copied().collect()
 }
 
 /// Two levels' surface voxels matched both ways with a 1-voxel (Chebyshev)
@@ -1019,12 +1070,6 @@ impl Matching {
     pub fn of(a: &Level, b: &Level) -> Matching {
         let set = |l: &Level| -> HashSet<IVec3> { (0..l.len()).filter(|&i| l.mask[i] > 0.0).map(|i| l.coords[i]).collect() };
         let (sa, sb) = (set(a), set(b));
-        let unmatched = |from: &HashSet<IVec3>, to: &HashSet<IVec3>| -> Vec<IVec3> {
-            from.iter()
-                .filter(|&&c| !(to.contains(&c) || NEIGHBOURS_26.iter().any(|&d| to.contains(&(c + d)))))
-                .copied()
-                .collect()
-        };
         Matching {
             a_voxels: sa.len(),
             b_voxels: sb.len(),

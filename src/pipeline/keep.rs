@@ -22,6 +22,9 @@ pub struct KeptVariant<'a> {
     pub levels: &'a [Level],
     /// The run seed its finer levels were sampled from, where it has one.
     pub seed: Option<u64>,
+    /// How its start was made (bent, or in a resized box), recorded beside
+    /// its levels so eval judges it as sampling did.
+    pub start: dataset::StartRecord,
     /// The record written beside its levels as [`KEPT_RECORD`] (JSON); its
     /// digest is the folder's sampling stamp.
     pub record: &'a [u8],
@@ -59,6 +62,7 @@ pub fn write_kept(paths: &RunPaths, config: &Config, kept: &KeptVariant) -> Resu
     };
     let preview = |level: &Level, path: &Path| super::encode::write_preview(level, &crate::render::preview_options(), path);
     dataset::write_variant(&staging, kept.levels, &provenance, Some(&preview), config.output.write_options())?;
+    kept.start.write(&staging)?;
     crate::util::fs::write_file(&staging.join(KEPT_RECORD), kept.record)?;
     let digest = format!("kept:{}", crate::util::digest::short(&String::from_utf8_lossy(kept.record)));
     mark_done(&staging, StampOf::Sample, &digest, t.elapsed().as_secs_f64())?;

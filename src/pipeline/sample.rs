@@ -190,35 +190,11 @@ pub fn sample_stage(job: &SampleJob) -> Result<Vec<PathBuf>> {
         let dir = variant_dir(job.variants_dir, i);
         let preview = |level: &Level, path: &Path| super::encode::write_preview(level, &crate::render::preview_options(), path);
         dataset::write_variant(&dir, &v[0].levels, &provenance, job.previews.then_some(&preview as _), config.output.write_options())?;
-        write_bend(&dir, v[0].bend.as_ref())?;
-        write_extent(&dir, v[0].extent.as_ref())?;
+        dataset::StartRecord { bend: v[0].bend, extent: v[0].extent }.write(&dir)?;
         mark_done(&dir, StampOf::Sample, &key(i), tv.elapsed().as_secs_f64())?;
     }
     log::info!("sample: {} variants in {:.1} s", todo.len(), t.elapsed().as_secs_f64());
     Ok(dirs)
-}
-
-/// Records a variant's bend beside its levels ([`crate::level::warp::BEND_FILE`],
-/// read by eval), or removes a stale record where it has none.
-fn write_bend(dir: &Path, bend: Option<&crate::level::warp::Bend>) -> Result<()> {
-    let path = dir.join(crate::level::warp::BEND_FILE);
-    match bend {
-        Some(b) => crate::util::fs::write_file(&path, serde_json::to_string_pretty(b).expect("a bend serialises").as_bytes()),
-        None if path.exists() => std::fs::remove_file(&path).map_err(|e| Error::file(&path, e.to_string())),
-        None => Ok(()),
-    }
-}
-
-/// Records a variant's extent beside its levels
-/// ([`crate::level::resize::EXTENT_FILE`], read by eval), or removes a stale
-/// record where its box was the exemplar's.
-fn write_extent(dir: &Path, extent: Option<&crate::level::resize::Extent>) -> Result<()> {
-    let path = dir.join(crate::level::resize::EXTENT_FILE);
-    match extent {
-        Some(e) => crate::util::fs::write_file(&path, serde_json::to_string_pretty(e).expect("an extent serialises").as_bytes()),
-        None if path.exists() => std::fs::remove_file(&path).map_err(|e| Error::file(&path, e.to_string())),
-        None => Ok(()),
-    }
 }
 
 /// The `sample` command: variants of the encoded exemplar in `exemplar_dir`

@@ -16,6 +16,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::io::dataset::StartRecord;
 use crate::learn::sample::{load_models, Models, SampleOptions};
 use crate::level::Level;
 use crate::pipeline::sample::{models_needed, sample_variants_observed};
@@ -326,6 +327,9 @@ struct Plan {
     extent: [f32; 3],
     given: Vec<Level>,
     made_by: String,
+    /// How the start of the shape continued from was made (none for new
+    /// variants: theirs is what sampling reports).
+    start: StartRecord,
 }
 
 fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, started: Instant) -> Result<String> {
@@ -334,19 +338,19 @@ fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, star
         Work::Finish => return finish(studio, id),
         Work::Sample { n, seed, extent } => {
             let how = if *extent == [1.0; 3] { String::new() } else { format!(", extent {extent:?}") };
-            Plan { first: 0, n: *n, seed: *seed, extent: *extent, given: Vec::new(), made_by: format!("new variant (seed {seed}{how})") }
+            Plan { first: 0, n: *n, seed: *seed, extent: *extent, given: Vec::new(), made_by: format!("new variant (seed {seed}{how})"), start: StartRecord::default() }
         }
         Work::MoreLike { source, levels, n, seed } => {
             let k = levels.last().map_or(0, |l| l.index);
             let made_by = format!("more like {source} (its levels up to {k}, seed {seed})");
-            Plan { first: 0, n: *n, seed: *seed, extent: [1.0; 3], given: levels.iter().map(|l| (**l).clone()).collect(), made_by }
+            Plan { first: 0, n: *n, seed: *seed, extent: [1.0; 3], given: levels.iter().map(|l| (**l).clone()).collect(), made_by, start: studio.start_of(source) }
         }
         // From the source's own seed and index: where the level is unedited,
         // the finer levels are the source's.
         Work::Regenerate { draft, source, level, seed } => {
             let s = seed.unwrap_or(SeedOf { seed: studio.config.train.seed, index: 0 });
             let made_by = format!("edit of {source} at level {} ({draft})", level.index);
-            Plan { first: s.index, n: 1, seed: s.seed, extent: [1.0; 3], given: vec![level.clone()], made_by }
+            Plan { first: s.index, n: 1, seed: s.seed, extent: [1.0; 3], given: vec![level.clone()], made_by, start: studio.start_of(source) }
         }
     };
     let models = models.ok_or_else(|| {
@@ -362,7 +366,7 @@ fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, star
     let indices = plan.first..plan.first + plan.n;
     let ids: Vec<String> = indices
         .clone()
-        .map(|index| studio.gallery.add_session(plan.made_by.clone(), Some(SeedOf { seed: plan.seed, index }), plan.given.clone()))
+        .map(|index| studio.gallery.add_session(plan.made_by.clone(), Some(SeedOf { seed: plan.seed, index }), plan.start, plan.given.clone()))
         .collect();
     studio.jobs.update(id, |j| j.outputs = ids.clone());
     let per_variant = finest + 1 - start;
@@ -371,14 +375,23 @@ fn run_job(studio: &Studio, models: Option<&Models>, id: &str, work: &Work, star
         crate::util::interrupt::check()?;
         let opts = SampleOptions { first: index, extent: plan.extent, ..SampleOptions::from_config(&studio.config, 1, plan.seed) };
         let sink = |_: usize, level: &Level| studio.level_made(id, shape, level, started, k * per_variant, total);
-        sample_variants_observed(models, &studio.exemplar, &opts, from.clone(), Some(&sink))?;
+        let made = sample_variants_observed(models, &studio.exemplar, &opts, from.clone(), Some(&sink))?;
+        // A continued shape keeps its source's start; a new one has the
+        // start sampling made (bent, or in a resized box).
+        if plan.given.is_empty() {
+            let start = made.first().map(|v| StartRecord { bend: v.bend, extent: v.extent }).unwrap_or_default();
+            studio.gallery.with(shape, |s| {
+                s.start = start;
+                Ok(())
+            })?;
+        }
         studio.judge_shape(shape);
     }
     Ok(format!("{} made (levels {start}..{finest})", if plan.n == 1 { "1 variant".into() } else { format!("{} variants", plan.n) }))
 }
 
 fn keep(studio: &Studio, id: &str, shape: &str) -> Result<String> {
-    let (levels, seed, made_by) = studio.gallery.with(shape, |s| {
+    let (levels, seed, made_by, start) = studio.gallery.with(shape, |s| {
         let made_by = match &s.origin {
             super::shapes::Origin::Session { made_by } => made_by.clone(),
             _ => return Err(Error::Invalid(format!("{shape} is already a variant of the run"))),
@@ -386,12 +399,13 @@ fn keep(studio: &Studio, id: &str, shape: &str) -> Result<String> {
         if let Some(k) = &s.kept_as {
             return Err(Error::Invalid(format!("{shape} is already kept as {k}")));
         }
-        Ok((s.levels.values().map(|l| (**l).clone()).collect::<Vec<Level>>(), s.seed, made_by))
+        Ok((s.levels.values().map(|l| (**l).clone()).collect::<Vec<Level>>(), s.seed, made_by, s.start))
     })?;
     let record = serde_json::to_vec_pretty(&StudioRecord { made_by, seed, compute: (if studio.bf16 { "bf16" } else { "f32" }).into() }).map_err(|e| Error::Invalid(e.to_string()))?;
     let kept = crate::pipeline::keep::KeptVariant {
         levels: &levels,
         seed: seed.map(|s| s.seed),
+        start,
         record: &record,
     };
     let (name, dir) = crate::pipeline::keep::write_kept(&studio.paths, &studio.config, &kept)?;
@@ -447,9 +461,16 @@ impl Studio {
     }
 
     /// The structure judge's verdict on a finished session variant.
+    /// How `shape`'s start was made (none for the exemplar or a shape
+    /// not found).
+    fn start_of(&self, shape: &str) -> StartRecord {
+        self.gallery.with(shape, |s| Ok(s.start)).unwrap_or_default()
+    }
+
     fn judge_shape(&self, shape: &str) {
-        let levels: Vec<Arc<Level>> = self.gallery.with(shape, |s| Ok(s.levels.values().cloned().collect())).unwrap_or_default();
-        let verdict = judge(&self.exemplar, self.exemplar_structure.as_ref(), &levels).unwrap_or_else(|| Verdict {
+        let (levels, start): (Vec<Arc<Level>>, StartRecord) =
+            self.gallery.with(shape, |s| Ok((s.levels.values().cloned().collect(), s.start))).unwrap_or_default();
+        let verdict = judge(&self.exemplar, self.exemplar_structure.as_ref(), &levels, &start).unwrap_or_else(|| Verdict {
             by: NOT_JUDGED.into(),
             ..Verdict::default()
         });

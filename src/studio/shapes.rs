@@ -10,8 +10,8 @@ use std::sync::{Arc, Mutex};
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::io::dataset;
-use crate::level::structure::{structure_level, Flag, Structure, StructureParams, StructureScores};
+use crate::io::dataset::{self, StartRecord};
+use crate::level::structure::{structure_level, Against, Flag, Structure, StructureParams, StructureScores};
 use crate::level::Level;
 use crate::pipeline::layout::{variant_name, VARIANT_PREFIX};
 
@@ -72,6 +72,9 @@ pub struct Shape {
     /// The level indices it has (on disk or in memory).
     pub present: Vec<usize>,
     pub seed: Option<SeedOf>,
+    /// How its start was made (bent, or in a resized box): what it is
+    /// judged against, and what its folder records when kept.
+    pub start: StartRecord,
     pub verdict: Option<Verdict>,
     /// Where it was written when kept (a session variant).
     pub kept_as: Option<String>,
@@ -147,6 +150,7 @@ impl Gallery {
             levels: exemplar.iter().map(|l| (l.index, Arc::new(l.clone()))).collect(),
             present: exemplar.iter().map(|l| l.index).collect(),
             seed: None,
+            start: StartRecord::default(),
             verdict: None,
             kept_as: None,
             preview: None,
@@ -196,7 +200,7 @@ impl Gallery {
     }
 
     /// Adds a session shape; returns its id.
-    pub fn add_session(&self, made_by: String, seed: Option<SeedOf>, levels: Vec<Level>) -> String {
+    pub fn add_session(&self, made_by: String, seed: Option<SeedOf>, start: StartRecord, levels: Vec<Level>) -> String {
         let id = self.session_ids.next();
         let mut shapes = self.lock();
         shapes.push(Shape {
@@ -205,6 +209,7 @@ impl Gallery {
             present: levels.iter().map(|l| l.index).collect(),
             levels: levels.into_iter().map(|l| (l.index, Arc::new(l))).collect(),
             seed,
+            start,
             verdict: None,
             kept_as: None,
             preview: None,
@@ -286,6 +291,8 @@ fn run_shape(name: String, folder: PathBuf, eval: Option<&serde_json::Value>) ->
             seed.zip(index).map(|(seed, index)| SeedOf { seed, index })
         }
     };
+    // A damaged record reads as none here; eval names it.
+    let start = StartRecord::read(&folder).unwrap_or_default();
     Shape {
         verdict: eval.and_then(|e| eval_verdict(e, &name)),
         id: name,
@@ -293,6 +300,7 @@ fn run_shape(name: String, folder: PathBuf, eval: Option<&serde_json::Value>) ->
         levels: BTreeMap::new(),
         present,
         seed,
+        start,
         kept_as: None,
         preview: None,
     }
@@ -327,19 +335,38 @@ pub fn exemplar_structure(exemplar: &[Level]) -> Option<(usize, Structure)> {
 /// The structure judge on a session variant: its structure level (and its
 /// fine level) against the exemplar's (`reference`, [`exemplar_structure`]),
 /// as the attempts and eval judge.
-pub fn judge(exemplar: &[Level], reference: Option<&(usize, Structure)>, levels: &[Arc<Level>]) -> Option<Verdict> {
+pub fn judge(exemplar: &[Level], reference: Option<&(usize, Structure)>, levels: &[Arc<Level>], start: &StartRecord) -> Option<Verdict> {
     let (index, ex_structure) = reference?;
     let ex = &exemplar[*index];
     let shape = levels.iter().find(|l| l.index == ex.index && l.resolution == ex.resolution)?;
     if shape.is_empty() {
         return Some(Verdict { flags: vec![Flag::Fragment.name().into()], whole: false, near_copy: false, by: "structure level".into() });
     }
-    let params = StructureParams::default();
-    let mut scores = StructureScores::new(shape, &Structure::of(shape), ex, ex_structure, &params);
+    // The exemplar made as the shape's start was (eval's references).
+    let reference_at = |k: usize| -> Option<Level> {
+        match (start.bend, start.extent) {
+            (Some(b), _) => Some(b.bent(exemplar, k)),
+            (None, Some(e)) => e.of(exemplar, k).ok(),
+            (None, None) => None,
+        }
+    };
+    let made = reference_at(ex.index).map(|l| {
+        let s = Structure::of(&l);
+        (l, s)
+    });
+    let against = match (&made, start.bend.is_some()) {
+        (Some((l, s)), true) => Against::Bent(l, s),
+        (Some((l, s)), false) => Against::AtExtent(l, s),
+        (None, _) => Against::Exemplar { level0: levels.iter().find(|l| l.index == 0).map(|l| (&**l, &exemplar[0])) },
+    };
+    // Its fine level against the exemplar's, bent likewise (eval's).
     let ex_fine = crate::level::structure::fine_level(exemplar);
-    if let Some((fine, ex_fine)) = ex_fine.and_then(|f| Some((levels.iter().find(|l| l.index == f.index)?, f))) {
-        scores = scores.with_fine(fine, ex_fine, &params);
-    }
+    let fine_reference = ex_fine.map(|f| match start.bend {
+        Some(b) => std::borrow::Cow::Owned(b.bent(exemplar, f.index)),
+        None => std::borrow::Cow::Borrowed(f),
+    });
+    let fine = fine_reference.as_deref().and_then(|r| Some((&**levels.iter().find(|l| l.index == r.index)?, r)));
+    let scores = StructureScores::judged(shape, (ex, ex_structure), against, fine, &StructureParams::default());
     Some(Verdict::of(&scores, "structure level"))
 }
 

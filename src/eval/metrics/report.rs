@@ -10,7 +10,7 @@ use super::detail::{DetailScores, Variation};
 use crate::grid::patches::{best_patch_matches, ExemplarPatches, LpParams, LpScores, PatchMatches};
 use super::occupancy::{diversity, same_lattice, Occupancy};
 use super::point_distances::chamfer;
-use crate::level::structure::{Flag, Structure, StructureParams, StructureScores};
+use crate::level::structure::{Against, Flag, Structure, StructureParams, StructureScores};
 use crate::level::Level;
 
 /// Scores of one variant (or one rung of the degradation ladder) against the
@@ -221,27 +221,19 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
             coverage_22: cover_22.summary(lp.threshold),
             detail: DetailScores::new(&Variation::of(v.finest), &ex_detail),
             colour: colourful.then(|| colour::colour_scores(&ColourPatches::of(v.finest), &ex_colour, &params.colour)),
-            structure: match (&ex_structure, v.structure_level, v.bent_reference) {
-                (Some((el, es)), Some(vl), Some(bent)) if vl.resolution == el.resolution && bent.resolution == el.resolution => {
-                    Some(StructureScores::against_bend(vl, &Structure::of(vl), (bent, &Structure::of(bent)), el, es, &params.structure))
-                }
-                (Some((el, es)), Some(vl), None) if vl.resolution == el.resolution && v.at_extent.is_some_and(|(_, a)| a.resolution == el.resolution) => {
-                    let at = v.at_extent.expect("matched").1;
-                    Some(StructureScores::at_extent(vl, &Structure::of(vl), (at, &Structure::of(at)), (el, es), &params.structure))
-                }
-                (Some((el, es)), Some(vl), _) if vl.resolution == el.resolution => {
-                    let s = StructureScores::new(vl, &Structure::of(vl), el, es, &params.structure);
-                    Some(match v.level0 {
-                        Some((l0, e0)) => s.with_coarse(l0, e0, &params.structure),
-                        None => s,
-                    })
+            structure: match (&ex_structure, v.structure_level) {
+                (Some((el, es)), Some(vl)) if vl.resolution == el.resolution => {
+                    let bent = v.bent_reference.filter(|b| b.resolution == el.resolution).map(|b| (b, Structure::of(b)));
+                    let at = v.at_extent.filter(|(_, a)| a.resolution == el.resolution).map(|(_, a)| (a, Structure::of(a)));
+                    let against = match (&bent, &at) {
+                        (Some((b, bs)), _) => Against::Bent(b, bs),
+                        (None, Some((a, s))) => Against::AtExtent(a, s),
+                        (None, None) => Against::Exemplar { level0: v.level0 },
+                    };
+                    Some(StructureScores::judged(vl, (el, es), against, v.fine_level, &params.structure))
                 }
                 _ => None,
-            }
-            .map(|scores| match v.fine_level {
-                Some((fine, reference)) => scores.with_fine(fine, reference, &params.structure),
-                None => scores,
-            }),
+            },
             bent: v.bent_reference.is_some(),
             extent: v.at_extent.map(|(e, _)| e),
             coarse_chamfer: cd,
@@ -356,7 +348,7 @@ impl EvalReport {
                 flags = if flags.is_empty() { "(bent)".into() } else { format!("{flags} (bent)") };
             }
             if let Some(e) = v.extent {
-                let e = format!("(extent {})", e.map(|x| x.to_string()).join(","));
+                let e = format!("(extent {})", crate::level::resize::Extent { extent: e });
                 flags = if flags.is_empty() { e } else { format!("{flags} {e}") };
             }
             format!(
