@@ -758,6 +758,10 @@ fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params
         return (0.0, true, (0.0, 0.0));
     }
     let s = StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, params);
+    if log::log_enabled!(log::Level::Trace) {
+        let m = crate::level::structure::Matching::of(level, ex_level);
+        log::trace!("level 0 candidate: F {:.3}, change {:.3}, precision {:.3}, recall {:.3}", m.fscore(), m.largest_change(), m.precision(), m.recall());
+    }
     let part_lost = s.flags.iter().any(|f| matches!(f, Flag::Shrunken | Flag::ThinPartLost));
     (s.score, part_lost, (s.copy_fscore, s.largest_change))
 }
