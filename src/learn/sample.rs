@@ -569,7 +569,7 @@ impl AttemptRank {
 /// (the first of equals). Whole is the criterion; with `reject_copies`,
 /// whole and not a near copy. (Before the seen-through flag, rejecting
 /// copies on the ruined tower traded them for towers split open at 64^3
-/// that the flags called whole, docs/results.md "Whole shapes"; that flag
+/// that the flags called whole, docs/lab/whole-shapes.md "Whole shapes"; that flag
 /// now sees those.)
 pub fn keep_attempt<T>(
     attempts: usize,
@@ -687,7 +687,7 @@ struct Offer {
 /// levels shred the stubs) and keeps the exemplar's thin parts
 /// (`thin_part_lost` at 16^3, and its thin voxels counted again one level
 /// finer, [`AtExtent::thin_ratio`]: a bunny whose back ear is gone inside the box is
-/// "new" too, F 0.97, and no finer level regrows the ear; docs/results.md,
+/// "new" too, F 0.97, and no finer level regrows the ear; docs/lab/new-shapes.md,
 /// "New shapes" and "Thin parts at level 0").
 struct Level0Pick {
     novel: bool,

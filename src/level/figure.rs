@@ -3,7 +3,7 @@
 //! kind a smooth random bend (`level::warp`) poses anew without leaving its
 //! style. A bent wall leans and a bent plate warps: architecture, CAD parts
 //! and man-made objects are made of planes and upright walls, and bending
-//! them is not a variant a person keeps (docs/results.md, "Bent starts").
+//! them is not a variant a person keeps (docs/lab/bent-figures.md, "Bent starts").
 //!
 //! Read from the surface normals of one level (the structure level, 64^3),
 //! each smoothed over its 3x3x3 neighbourhood of surface voxels so a stone's
@@ -18,7 +18,7 @@
 //!   walls standing along it face (a sphere: 0.26 along every axis; the
 //!   ruined tower 0.77 along its height, the demo tower 0.55, a cube 0.61).
 //!
-//! Measured on 42 meshes at 64^3 (docs/results.md, "Bent starts for
+//! Measured on 42 meshes at 64^3 (docs/lab/bent-figures.md, "Bent starts for
 //! figures"): every man-made one reads as no figure; the animals and
 //! statues that face every way read as figures, and upright or elongated
 //! organic ones (a cactus, a femur, a standing man) do not, so they are

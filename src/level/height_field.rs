@@ -20,7 +20,7 @@ use super::Level;
 
 /// Share of a level's occupied columns, along an axis, whose voxels form one
 /// unbroken run for the level to count as a height field along it. Measured
-/// (docs/results.md, "Holes through a sheet"): 1.00 on the terrain of
+/// (docs/lab/structure-flags.md, "Holes through a sheet"): 1.00 on the terrain of
 /// ../shared/data at 32^3-128^3 along its up axis; at most 0.53 on the
 /// towers, the bunny and the CAD part, along any axis.
 pub const HEIGHT_FIELD_SHARE: f64 = 0.95;

@@ -407,14 +407,14 @@ pub fn free_boundary(level: &Level) -> Vec<bool> {
 pub const EXTENT_TOLERANCE_VOXELS: f64 = 1.0;
 
 /// Thresholds of the structural flags, in the figures' own units. Chosen on
-/// the degradation ladder and on sampled variants (docs/results.md, "Whole shapes").
+/// the degradation ladder and on sampled variants (docs/lab/whole-shapes.md, "Whole shapes").
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct StructureParams {
     /// A variant with less surface than this share of the exemplar's (or
     /// more than its inverse) is a fragment (or an overgrowth).
     pub min_mass_ratio: f64,
     /// The bounding box along some axis shorter than this share of the
-    /// exemplar's: shrunken. 0.9, measured (docs/results.md, "New shapes"):
+    /// exemplar's: shrunken. 0.9, measured (docs/lab/new-shapes.md, "New shapes"):
     /// the bunny's variants whose ears lost their tips (and came apart into
     /// flakes at the finer levels) read 0.81 (13 of 16 voxels at level 0),
     /// the whole ones 0.975; every tower and demo variant, whole or ruined,
@@ -454,7 +454,7 @@ pub struct StructureParams {
     pub coarse_copy_fscore: f64,
     /// More of the inside seen than the exemplar shows, in some view band (a
     /// share of the silhouette, [`super::seen_through::seen_through_excess`]):
-    /// split open or torn through. 0.02, measured (docs/results.md): on real
+    /// split open or torn through. 0.02, measured (docs/lab/new-shapes.md, "New shapes: the level-0 choice and the seen-through flag"): on real
     /// runs it flags the one tower of ten torn open, and two of the demo's
     /// ten, its most ruined, which a person would keep; on the ladder it
     /// flags the slit on five meshes of seven (not the airplane, 0.015, nor a
@@ -464,7 +464,7 @@ pub struct StructureParams {
     /// Fewer thin-part voxels ([`thin_voxels`]) than this share of the
     /// exemplar's: a thin part lost (an ear gone inside the bounding box,
     /// where no other figure moves past its limit). 0.8, measured at 64^3
-    /// (docs/results.md, "Thin parts"): every bunny variant of the last runs
+    /// (docs/lab/new-shapes.md, "Thin parts"): every bunny variant of the last runs
     /// 0.36-0.73 (each lost or cut short its back ear); every tower and demo
     /// variant 0.90-1.23.
     pub min_thin_ratio: f64,
@@ -474,13 +474,13 @@ pub struct StructureParams {
     /// Where the exemplar is a height field without a hole (a terrain, a
     /// cliff; `Structure::sheet_axis`), more columns with no surface
     /// inside the footprint than this share of the exemplar's surface voxels:
-    /// holed. 0.001, measured (docs/results.md, "Holes through a sheet"):
+    /// holed. 0.001, measured (docs/lab/structure-flags.md, "Holes through a sheet"):
     /// 3 columns at 64^3 on the terrain of ../shared/data, where its
     /// variants with holes seen from above have 3-62.
     pub max_hole_share: f64,
     /// More of the surface like no part of the exemplar than this share
     /// ([`unlike_share`], at the structure level): out of style. 0.09,
-    /// measured (docs/results.md, "Out of style"): the ruined tower's
+    /// measured (docs/lab/structure-flags.md, "Out of style"): the ruined tower's
     /// variants with a wall fallen outward or a heap of rubble read
     /// 0.098-0.157, those a person keeps 0-0.085; every terrain variant
     /// 0.006-0.084, every bunny variant 0-0.065; the CAD part's broken fin 0.096.

@@ -1,6 +1,6 @@
 //! A smooth random bend of a level: the exemplar deformed into a new pose,
 //! the variant sampling makes where the networks offer nothing new
-//! (`sample.bend_voxels`; docs/results.md, "Bent starts"). A level-0 network
+//! (`sample.bend_voxels`; docs/lab/bent-figures.md, "Bent starts"). A level-0 network
 //! that learned one figure with nothing repeated in it (a bunny) draws that
 //! figure again or loses a part of it; a bent exemplar is a new pose of the
 //! whole figure with its own detail and colours. Tried and not kept: the

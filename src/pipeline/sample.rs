@@ -310,7 +310,7 @@ pub fn sample_variants_observed(
             // A bent variant takes its detail from the exemplar bent the
             // same way: the exemplar's own patches, turned by the bend,
             // fit the bent surface where the unbent ones leave facets and
-            // flakes (docs/results.md, "Bent starts").
+            // flakes (docs/lab/bent-figures.md, "Bent starts").
             let bent_source: Option<Vec<Level>> = v.bend.map(|b| {
                 exemplar_levels[..=last]
                     .iter()
