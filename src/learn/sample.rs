@@ -336,6 +336,7 @@ pub fn sample_observed(
     };
     let copies_only = std::cell::Cell::new(false);
     let resized_whole = std::cell::Cell::new(false);
+    let box_copies = std::cell::Cell::new(0);
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
     let bending = Bending::of(opts, exemplar_levels, from.is_some());
     let resizing = opts.resize_max > 0.0 && could_bend(opts) && !continuing && !matches!(bending, Bending::Bends(_));
@@ -344,6 +345,7 @@ pub fn sample_observed(
             .map(|i| {
                 copies_only.set(false);
                 resized_whole.set(false);
+                box_copies.set(0);
                 let job = OneVariant {
                     models,
                     exemplar_levels,
@@ -358,6 +360,7 @@ pub fn sample_observed(
                     bending,
                     copies_only: &copies_only,
                     resized_whole: &resized_whole,
+                    box_copies: &box_copies,
                     resizing,
                     told: sink.map(|f| (i, f)),
                 };
@@ -411,6 +414,9 @@ struct OneVariant<'a> {
     /// last attempt takes the exemplar's box (a whole copy before a broken
     /// shape).
     resized_whole: &'a std::cell::Cell<bool>,
+    /// Attempts of this variant in the exemplar's box that were whole near
+    /// copies: at [`BOX_COPIES_BEFORE_RESIZE`] its later attempts resize.
+    box_copies: &'a std::cell::Cell<usize>,
     /// Whether a pass whose level-0 candidates are none new enough is
     /// resized (`resize_max`, not bent, the novel pick in the exemplar's box).
     resizing: bool,
@@ -613,6 +619,12 @@ fn candidate_seed(seed: u64, k: usize) -> u64 {
 fn could_bend(opts: &SampleOptions) -> bool {
     opts.level0_pick == crate::config::Level0Pick::Novel && opts.level0_candidates > 1 && opts.extent == [1.0; 3]
 }
+
+/// Attempts of a variant in the exemplar's box that may be whole near copies
+/// before its later attempts are resized (with `resize_max`): one copy may
+/// be the seed's bad luck, as on the demo, whose next attempt is a tower of
+/// its own; two say the networks copy.
+pub const BOX_COPIES_BEFORE_RESIZE: usize = 2;
 
 /// Resized passes that may all fail (none whole at the structure level)
 /// before sampling stops resizing for the networks that made them: a
@@ -990,6 +1002,16 @@ impl OneVariant<'_> {
                     AttemptRank { whole: s.whole(), new: !s.flags.contains(&Flag::NearCopy), score: s.score }
                 }
             };
+            // Whole copies in the exemplar's box, though level 0 looked new
+            // enough (a house whose copies differ in a hidden courtyard
+            // floor): the networks copy, and later attempts resize.
+            if p.resized.is_none() && p.bend.is_none() && rank.whole && !rank.new && self.resizes() {
+                self.box_copies.set(self.box_copies.get() + 1);
+                if self.box_copies.get() == BOX_COPIES_BEFORE_RESIZE {
+                    log::info!("{BOX_COPIES_BEFORE_RESIZE} attempts in the exemplar's box were whole near copies: the later ones resize");
+                    self.copies_only.set(true);
+                }
+            }
             if p.resized.is_some() {
                 self.resized_whole.set(self.resized_whole.get() || rank.whole);
                 let mut record = self.models.resized_passes.lock().unwrap_or_else(|e| e.into_inner());

@@ -5,6 +5,7 @@
 //! offset (3), normal (3), colour (3), mask (1). See [`Channel`].
 
 pub mod edit;
+pub mod outline;
 pub mod figure;
 pub mod files;
 pub mod height_field;

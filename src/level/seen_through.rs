@@ -88,7 +88,7 @@ pub fn seen_through(level: &Level) -> Vec<f64> {
 }
 
 /// Unit directions from the shape towards the eye, [`VIEWS`] of them.
-fn view_directions(up: Vec3) -> Vec<Vec3> {
+pub(crate) fn view_directions(up: Vec3) -> Vec<Vec3> {
     let side = up.any_orthonormal_vector();
     let other = up.cross(side);
     let mut out = Vec::with_capacity(VIEWS);

@@ -452,6 +452,16 @@ pub struct StructureParams {
     /// network, reads 1.000 against the exemplar's; the ruined tower's and
     /// the demo's whole variants 0.960-0.995.
     pub coarse_copy_fscore: f64,
+    /// A shape sampled in the exemplar's box whose outline, from every one
+    /// of the 24 views, is the exemplar's but for less than this share of
+    /// the pixels either covers ([`super::outline::outline_difference`], 1
+    /// pixel a voxel of 64^3, 1 pixel of tolerance) is a near copy: a person
+    /// sees the exemplar again, whatever moved inside or behind its outline.
+    /// 0.08, measured at 64^3 (`examples/seen_difference.rs`): a Greek stone
+    /// house's copies, their hidden courtyard floors moved, read
+    /// 0.012-0.064; the ruined tower's variants 0.097-0.151; the demo's
+    /// 0.101-0.133 but for one, 0.036, the exemplar with its notch filled.
+    pub max_copy_outline_difference: f64,
     /// More of the inside seen than the exemplar shows, in some view band (a
     /// share of the silhouette, [`super::seen_through::seen_through_excess`]):
     /// split open or torn through. 0.02, measured (docs/lab/new-shapes.md, "New shapes: the level-0 choice and the seen-through flag"): on real
@@ -508,6 +518,7 @@ impl Default for StructureParams {
             moved_min_share: 0.04,
             moved_mass_slack: 0.06,
             coarse_copy_fscore: 0.998,
+            max_copy_outline_difference: 0.08,
             max_seen_through_excess: 0.02,
             min_thin_ratio: 0.8,
             min_exemplar_thin_share: 0.02,
@@ -657,6 +668,11 @@ pub struct StructureScores {
     /// pose or size).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub coarse_copy_fscore: Option<f64>,
+    /// The worst view's share of the outline that differs from the
+    /// exemplar's ([`StructureScores::with_outline`]); not written where not
+    /// compared (a bent or resized variant).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outline_difference: Option<f64>,
     /// The largest connected place where the variant differs from the
     /// exemplar, a share of the exemplar's surface voxels ([`largest_change`]).
     #[serde(default)]
@@ -793,6 +809,7 @@ impl StructureScores {
             extra_seams,
             fine_unlike_share: None,
             coarse_copy_fscore: None,
+            outline_difference: None,
             copy_fscore,
             largest_change,
             score: terms.iter().copied().fold(1.0, f64::min),
@@ -835,6 +852,23 @@ impl StructureScores {
         let f = Matching::of(shape0, exemplar0).fscore();
         self.coarse_copy_fscore = Some(f);
         if f >= p.coarse_copy_fscore && !self.flags.contains(&Flag::NearCopy) {
+            self.flags.push(Flag::NearCopy);
+        }
+        self
+    }
+
+    /// These scores with the outlines compared too: `shape` against
+    /// `exemplar` (the same level, in the exemplar's box) from the 24 views
+    /// ([`super::outline::outline_difference`]). Under
+    /// [`StructureParams::max_copy_outline_difference`] the shape is a near
+    /// copy: it looks like the exemplar from everywhere.
+    pub fn with_outline(mut self, shape: &Level, exemplar: &Level, p: &StructureParams) -> Self {
+        if shape.resolution != exemplar.resolution {
+            return self;
+        }
+        let d = super::outline::outline_difference(shape, exemplar);
+        self.outline_difference = Some(d);
+        if d < p.max_copy_outline_difference && !self.flags.contains(&Flag::NearCopy) {
             self.flags.push(Flag::NearCopy);
         }
         self
@@ -899,7 +933,7 @@ impl StructureScores {
             Against::Bent(bent, b) => Self::against_bend(shape, &s, (bent, b), exemplar.0, exemplar.1, p),
             Against::AtExtent(at, a) => Self::at_extent(shape, &s, (at, a), exemplar, p),
             Against::Exemplar { level0 } => {
-                let scores = Self::new(shape, &s, exemplar.0, exemplar.1, p);
+                let scores = Self::new(shape, &s, exemplar.0, exemplar.1, p).with_outline(shape, exemplar.0, p);
                 match level0 {
                     Some((l0, e0)) => scores.with_coarse(l0, e0, p),
                     None => scores,
