@@ -114,6 +114,15 @@ pub fn extra_seams(shape: &TopSteps, exemplar: &TopSteps) -> usize {
     (0..2).filter(|&a| exemplar.shares[a] <= SMOOTH_SHARE).map(|a| shape.seams[a].saturating_sub(exemplar.seams[a])).max().unwrap_or(0)
 }
 
+/// Along an axis where the exemplar's top is smooth ([`SMOOTH_SHARE`]), the
+/// share of a shape's neighbouring inner columns that step beyond the
+/// exemplar's share (the largest over such axes; 0 where the exemplar is
+/// smooth along no axis): a roof creased or cracked across, whose steps
+/// wander along it (a diagonal crack) and so never gather into a seam.
+pub fn smooth_step_excess(shape: &TopSteps, exemplar: &TopSteps) -> f64 {
+    (0..2).filter(|&a| exemplar.shares[a] <= SMOOTH_SHARE).map(|a| (shape.shares[a] - exemplar.shares[a]).max(0.0)).fold(0.0, f64::max)
+}
+
 /// The voxel columns of a prism roof for the tests: a gable house `length`
 /// long along x, `width` wide along z, its ridge `rise` above the eaves,
 /// with the roof's height shifted by `seam` voxels from `seam_at` on (a roof
@@ -177,10 +186,36 @@ mod tests {
     }
 
     #[test]
+    fn a_diagonal_crack_across_a_smooth_roof_steps_without_a_seam() {
+        let whole = top_steps(&gable(40, 20, 16, 100, 0));
+        let mut cracked = gable(40, 20, 16, 100, 0);
+        // A slot two columns wide and two voxels deep, diagonal across the
+        // roof: each row steps down and up once, at its own place.
+        let tops: std::collections::HashMap<(i32, i32), i32> = cracked.coords.iter().fold(Default::default(), |mut m, c| {
+            let e = m.entry((c.x, c.z)).or_insert(c.y);
+            *e = (*e).max(c.y);
+            m
+        });
+        for c in cracked.coords.iter_mut() {
+            let along = c.x - 10 - (c.z - 20);
+            if (10..12).contains(&along) && c.z > 20 && c.z < 39 && tops[&(c.x, c.z)] == c.y {
+                c.y -= 2;
+            }
+        }
+        let t = top_steps(&cracked);
+        assert_eq!(extra_seams(&t, &whole), 0, "{t:?}");
+        assert!(smooth_step_excess(&t, &whole) > 0.02, "{t:?}");
+        // A whole longer house and a dormer stay under it.
+        assert!(smooth_step_excess(&top_steps(&gable(56, 20, 16, 100, 0)), &whole) < 0.005);
+    }
+
+    #[test]
     fn where_the_exemplar_steps_along_both_axes_nothing_is_judged() {
         let rough = TopSteps { shares: [0.05, 0.2], seams: [0, 0] };
         assert_eq!(extra_seams(&TopSteps { shares: [0.5, 0.5], seams: [3, 3] }, &rough), 0);
+        assert_eq!(smooth_step_excess(&TopSteps { shares: [0.5, 0.5], seams: [3, 3] }, &rough), 0.0);
         let smooth_x = TopSteps { shares: [0.0, 0.4], seams: [0, 5] };
         assert_eq!(extra_seams(&TopSteps { shares: [0.5, 0.0], seams: [2, 9] }, &smooth_x), 2);
+        assert_eq!(smooth_step_excess(&TopSteps { shares: [0.5, 0.0], seams: [2, 9] }, &smooth_x), 0.5);
     }
 }
