@@ -94,8 +94,7 @@ venv() {
     touch "$dir/.complete"
   fi
 }
-USD_VENV="$CACHE/usd-venv"
-venv "$USD_VENV" "usd-core==26.11"
+USD_VENV="$(dirname "$(dirname "$(bash "$ROOT/scripts/usd-venv.sh")")")"
 [ -s "$WORK/run/variants.usda" ] || { echo "interop: the run wrote no variants.usda" >&2; exit 1; }
 # Surface voxels of each variant's finest level, counted by pyopenvdb (not by us).
 /usr/bin/python3 - "$WORK/run" > "$WORK/usd_counts.json" <<'PY'

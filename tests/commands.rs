@@ -636,3 +636,94 @@ fn the_integrator_examples_encode_and_read_levels() {
     let o = std::process::Command::new(&read).arg(dir.path().join("missing.vdb")).output().unwrap();
     assert!(!o.status.success(), "a missing file is an error");
 }
+
+/// Every command that writes files writes the same ones with `-q` as
+/// without: quiet only silences the log (a command whose work ran inside a
+/// log macro's arguments wrote nothing at the quiet level once).
+#[test]
+fn quiet_or_not_every_command_writes_the_same_files() {
+    let run = tiny_trained_run();
+    let dir = tempfile::tempdir().unwrap();
+    let level = run.join("variants/variant_000/level_2.vdb");
+    let (l, e) = (level.to_str().unwrap(), run.join("exemplar"));
+    let e = e.to_str().unwrap();
+    let variant = run.join("variants/variant_000");
+    let commands: Vec<(&str, Vec<String>)> = vec![
+        ("encode", vec!["encode".into(), run.join("exemplar.ply").to_str().unwrap().into(), "--finest".into(), "64".into(), "-o".into(), "OUT/enc".into()]),
+        ("sample", vec!["sample".into(), run.to_str().unwrap().into(), "-n".into(), "1".into(), "--seed".into(), "5".into(), "-o".into(), "OUT/variants".into()]),
+        ("mesh", vec!["mesh".into(), l.into(), "-o".into(), "OUT/mesh.ply".into()]),
+        ("points", vec!["points".into(), l.into(), "-o".into(), "OUT/points.ply".into()]),
+        ("render", vec!["render".into(), l.into(), "-o".into(), "OUT/level.png".into()]),
+        ("edit", vec!["edit".into(), l.into(), "-o".into(), "OUT/edited.vdb".into(), "delete".into(), "--box".into(), "0,0,0:31,63,63".into()]),
+        ("eval", vec!["eval".into(), e.into(), variant.to_str().unwrap().into(), "-o".into(), "OUT/eval.json".into()]),
+        ("ladder", vec!["ladder".into(), e.into(), "-o".into(), "OUT/ladder".into(), "--profile".into(), "none".into()]),
+        ("usd", vec!["usd".into(), "OUT/run".into()]),
+    ];
+    for (name, args) in commands {
+        let mut written = Vec::new();
+        for quiet in [false, true] {
+            let out = dir.path().join(format!("{name}_{}", if quiet { "quiet" } else { "loud" }));
+            std::fs::create_dir_all(&out).unwrap();
+            if name == "usd" {
+                // usd writes into a run folder: a copy of the tiny run each time.
+                let copy = std::process::Command::new("cp").arg("-r").arg(run).arg(out.join("run")).status().unwrap();
+                assert!(copy.success());
+                for f in ["variants.usda", "variants.usdc"] {
+                    let _ = std::fs::remove_file(out.join("run").join(f));
+                }
+            }
+            let mut argv: Vec<String> = args.iter().map(|a| a.replace("OUT", out.to_str().unwrap())).collect();
+            if quiet {
+                argv.insert(0, "-q".into());
+            }
+            let o = shapeshifter(&argv.iter().map(String::as_str).collect::<Vec<_>>());
+            // The ladder exits 1 where a check of its order fails; quiet or
+            // not, the same.
+            assert!(o.status.code() == Some(0) || (name == "ladder" && o.status.code() == Some(1)), "{name} (-q: {quiet}): {}", stderr(&o));
+            if quiet {
+                assert!(stderr(&o).lines().all(|l| !l.starts_with("[INFO")), "{name} -q logged: {}", stderr(&o));
+            }
+            written.push((out.clone(), files_under(&out), o.status.code()));
+        }
+        let [(loud, a, ca), (quiet, b, cb)] = <[_; 2]>::try_from(written).unwrap();
+        assert_eq!(ca, cb, "{name}: exit codes differ with -q");
+        assert_eq!(a, b, "{name}: -q wrote other files");
+        assert!(!a.is_empty(), "{name} wrote nothing");
+        for rel in &a {
+            let (pa, pb) = (loud.join(rel), quiet.join(rel));
+            if !pa.is_file() {
+                continue;
+            }
+            let ext = pa.extension().map(|x| x.to_string_lossy().into_owned()).unwrap_or_default();
+            match ext.as_str() {
+                // Records and logs hold timings; level files a fresh UUID.
+                "json" | "log" | "html" | "lock" | "toml" | "usda" | "usdc" => {}
+                "vdb" if !rel.ends_with(".points.vdb") => {
+                    let (x, _) = vdb::read_level(&pa).unwrap();
+                    let (y, _) = vdb::read_level(&pb).unwrap();
+                    assert_eq!((x.coords, x.offsets, x.normals, x.colours, x.mask), (y.coords, y.offsets, y.normals, y.colours, y.mask), "{name}: {rel}");
+                }
+                "vdb" => {}
+                _ => assert!(std::fs::read(&pa).unwrap() == std::fs::read(&pb).unwrap(), "{name}: {rel} differs with -q"),
+            }
+        }
+    }
+}
+
+/// The files under `dir`, as paths relative to it, sorted.
+fn files_under(dir: &std::path::Path) -> Vec<String> {
+    fn walk(root: &std::path::Path, d: &std::path::Path, out: &mut Vec<String>) {
+        for e in std::fs::read_dir(d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(root, &p, out);
+            } else {
+                out.push(p.strip_prefix(root).unwrap().to_string_lossy().into_owned());
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}

@@ -298,6 +298,11 @@ fn a_light_mesh_is_baked_into_a_texture_and_its_usd_layer_counts_as_its_files() 
     let asset = std::fs::read_to_string(dir.path().join("variants.usda")).unwrap();
     assert!(asset.contains("prepend references = @./variants/variant_000/variant.usda@"));
     assert!(asset.contains("defaultPrim = \"sphere\""));
+    // Pixar's usd-core opens it and its validators find nothing.
+    let usd_python = usd_core_python();
+    if let Some(py) = &usd_python {
+        usd_core_check(py, dir.path(), "usda");
+    }
 
     // Binary layers instead: written (not reused from the text's stamp), the
     // text ones removed, so the folder holds one asset (what they hold, and
@@ -309,6 +314,9 @@ fn a_light_mesh_is_baked_into_a_texture_and_its_usd_layer_counts_as_its_files() 
         assert_eq!(&std::fs::read(&f).unwrap()[..8], b"PXR-USDC", "{}", f.display());
     }
     assert!(!variant.join("variant.usda").exists() && !dir.path().join("variants.usda").exists());
+    if let Some(py) = &usd_python {
+        usd_core_check(py, dir.path(), "usdc");
+    }
 
     // Texture off: meshed again, no baked file left from before.
     let plain = MeshConfig { faces: 600, glb: false, texture: 0 };

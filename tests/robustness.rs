@@ -12,7 +12,7 @@ use std::process::{Command, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use common::{shapeshifter, skip, stderr, stdout};
+use common::{shapeshifter, skip, stderr, stdout, usd_core_check, usd_core_python};
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_shapeshifter")
@@ -91,8 +91,11 @@ fn temporaries(dir: &Path) -> Vec<PathBuf> {
 /// is deterministic, hold the same bytes.
 fn not_whole(dir: &Path, rel: &Path, reference: &Path) -> Option<String> {
     let p = dir.join(rel);
-    let bytes = std::fs::read(&p).ok()?;
     let name = rel.to_string_lossy().into_owned();
+    let bytes = match std::fs::read(&p) {
+        Ok(b) => b,
+        Err(e) => return Some(format!("{name}: unreadable: {e}")),
+    };
     let ext = rel.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
     let opened = match ext.as_str() {
         "vdb" => shapeshifter::io::vdb::summarise(&p).map(|_| ()).map_err(|e| e.to_string()),
@@ -102,6 +105,10 @@ fn not_whole(dir: &Path, rel: &Path, reference: &Path) -> Option<String> {
         "ply" => shapeshifter::io::mesh::load(&p).map(|_| ()).map_err(|e| e.to_string()),
         "safetensors" => tch::Tensor::read_safetensors(&p).map(|_| ()).map_err(|e| e.to_string()),
         "html" => if bytes.trim_ascii_end().ends_with(b"</html>") { Ok(()) } else { Err("cut off".into()) },
+        "obj" => shapeshifter::io::mesh::load(&p).map(|_| ()).map_err(|e| e.to_string()),
+        "glb" => gltf::Gltf::from_slice(&bytes).map(|_| ()).map_err(|e| e.to_string()),
+        "usda" => usda_whole(&bytes),
+        "usdc" => usdc_whole(&bytes),
         // Logs grow line by line by design; the lock file is rewritten in place.
         "log" | "lock" => Ok(()),
         _ => if bytes.is_empty() { Err("empty".into()) } else { Ok(()) },
@@ -127,6 +134,50 @@ fn not_whole(dir: &Path, rel: &Path, reference: &Path) -> Option<String> {
         }
     }
     None
+}
+
+/// A text USD layer read back: its header, and every bracket closed
+/// outside strings (a layer cut off by a full disk ends inside one).
+fn usda_whole(bytes: &[u8]) -> Result<(), String> {
+    let text = std::str::from_utf8(bytes).map_err(|e| e.to_string())?;
+    if !text.starts_with("#usda 1.0") {
+        return Err("no #usda 1.0 header".into());
+    }
+    let (mut depth, mut in_string) = (0i64, false);
+    for c in text.chars() {
+        match (c, in_string) {
+            ('"', _) => in_string = !in_string,
+            ('(' | '[' | '{', false) => depth += 1,
+            (')' | ']' | '}', false) => depth -= 1,
+            _ => {}
+        }
+        if depth < 0 {
+            return Err("a bracket closed that was never opened".into());
+        }
+    }
+    if depth != 0 || in_string {
+        return Err("cut off: brackets or a string left open".into());
+    }
+    Ok(())
+}
+
+/// A binary USD layer read back: its magic, and the table of contents its
+/// header points to, whole and ending the file (it is written last).
+fn usdc_whole(bytes: &[u8]) -> Result<(), String> {
+    if bytes.len() < 24 || &bytes[..8] != b"PXR-USDC" {
+        return Err("no PXR-USDC header".into());
+    }
+    let toc = u64::from_le_bytes(bytes[16..24].try_into().unwrap());
+    let len = bytes.len() as u64;
+    if toc < 24 || toc + 8 > len {
+        return Err(format!("cut off: the table of contents at {toc} lies past the end ({len} bytes)"));
+    }
+    // The TOC: a count, then per section a 16-byte name, start and size; it ends the file.
+    let sections = u64::from_le_bytes(bytes[toc as usize..toc as usize + 8].try_into().unwrap());
+    if toc + 8 + 32 * sections != len {
+        return Err(format!("cut off: {sections} sections listed at {toc}, the file ends at {len}"));
+    }
+    Ok(())
 }
 
 fn is_root() -> bool {
@@ -227,6 +278,10 @@ fn full_disks(percents: &[u64]) {
     assert!(failures_seen >= 3, "the disk filled at too few points to test anything:\n{}", table.join("\n"));
     let o = shapeshifter(&["compare", reference.join("variants").to_str().unwrap(), out.join("variants").to_str().unwrap()]);
     assert!(o.status.success() && stdout(&o).contains("identical"), "resumed after full disks, the variants differ: {}", stdout(&o));
+    // The resumed run's USD asset, read back by Pixar's usd-core.
+    if let Some(py) = usd_core_python() {
+        usd_core_check(&py, &out, "usda");
+    }
 
     // A mesh that does not fit: one error line, no file.
     drop(disk);

@@ -123,3 +123,36 @@ pub fn tiny_trained_run() -> &'static Path {
     })
     .1
 }
+
+/// The Python of the usd-core virtual environment `make test` installs
+/// (`scripts/usd-venv.sh`), where it is complete; else the test is recorded
+/// as skipped ([`skip`]).
+pub fn usd_core_python() -> Option<PathBuf> {
+    let cache = std::env::var_os("SHAPESHIFTER_CACHE").map(PathBuf::from).unwrap_or_else(|| {
+        std::env::var_os("XDG_CACHE_HOME")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(std::env::var_os("HOME").unwrap_or_default()).join(".cache"))
+            .join("shapeshifter")
+    });
+    let venv = cache.join("usd-venv");
+    if venv.join(".complete").is_file() {
+        return Some(venv.join("bin/python"));
+    }
+    skip(&format!("usd-core is not installed in {} (`make test` installs it: scripts/usd-venv.sh)", venv.display()));
+    None
+}
+
+/// Pixar's usd-core opens the USD asset of run folder `run` and checks it
+/// (`scripts/interop/usd_check.py`: the stage, its variants, meshes,
+/// volumes, textures, and usd-core's validators); `ext`: usda or usdc.
+/// Returns the script's output; panics with it when a check fails.
+pub fn usd_core_check(python: &Path, run: &Path, ext: &str) -> String {
+    let counts = run.join(".usd_check_counts.json");
+    std::fs::write(&counts, "{}").unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/interop/usd_check.py");
+    let o = Command::new(python).arg(script).arg(run).arg(&counts).arg(ext).output().expect("usd-core's python runs");
+    let _ = std::fs::remove_file(&counts);
+    let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "usd-core rejects {}'s asset ({ext}):\n{text}", run.display());
+    text
+}
