@@ -308,14 +308,26 @@ fn processes_naming(folder: &Path) -> Vec<String> {
 }
 
 fn wait_for(path: &Path, limit: Duration) -> bool {
+    wait_until(limit, || path.exists())
+}
+
+/// Polls `state` until it holds or `limit` has passed; whether it held.
+fn wait_until(limit: Duration, mut state: impl FnMut() -> bool) -> bool {
     let t0 = Instant::now();
     while t0.elapsed() < limit {
-        if path.exists() {
+        if state() {
             return true;
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    false
+    state()
+}
+
+/// Whether a training log holds a logged step: the training is under way
+/// (children log their steps whatever the parent's log level: its progress
+/// bars read them).
+fn training_under_way(log: &Path) -> bool {
+    std::fs::read_to_string(log).is_ok_and(|t| t.lines().any(|l| l.contains(" step ")))
 }
 
 /// Sends `sig` to `child` (started with stderr piped) and waits for it: its
@@ -368,10 +380,14 @@ fn stops(cases: &[(i32, &str, &str)]) {
             .spawn()
             .unwrap();
         assert!(wait_for(&out.join(marker), Duration::from_secs(120)), "{stage}: {marker} never appeared");
-        // Into the stage: training a second, sampling and meshing at once.
-        std::thread::sleep(Duration::from_millis(if *stage == "training" { 1500 } else { 100 }));
+        // Into the stage: training once a step is logged, sampling and
+        // meshing as soon as their logs exist.
+        if *stage == "training" {
+            assert!(wait_until(Duration::from_secs(120), || training_under_way(&out.join(marker))), "{stage}: no training step logged");
+        }
         let (status, err, seconds) = stop(child, *sig);
-        std::thread::sleep(Duration::from_millis(200));
+        // The run's children end with it (they checkpoint first).
+        wait_until(Duration::from_secs(10), || processes_naming(&out).is_empty());
         let left = processes_naming(&out);
         let temps = temporaries(&out);
         let want = 128 + sig;
@@ -474,11 +490,10 @@ fn train_and_sample_stop_on_a_signal_and_end_like_an_uninterrupted_run() {
     let mut train: Vec<String> = vec!["train".into(), exemplar.display().to_string(), "--models".into(), models.display().to_string(), "--jobs".into(), "2".into(), "--profile".into(), "demo".into()];
     train.extend(SLOW.iter().map(|s| s.to_string()));
     let child = Command::new(bin()).args(&train).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
-    assert!(wait_for(&models.join("level_1_train.log"), Duration::from_secs(60)));
-    std::thread::sleep(Duration::from_millis(1500));
+    assert!(wait_until(Duration::from_secs(120), || training_under_way(&models.join("level_1_train.log"))), "no training step logged");
     let (status, err, _) = stop(child, libc::SIGTERM);
     assert_eq!(status.code(), Some(143), "train: {err}");
-    std::thread::sleep(Duration::from_millis(200));
+    wait_until(Duration::from_secs(10), || processes_naming(&models).is_empty());
     assert!(processes_naming(&models).is_empty(), "train: {:?}", processes_naming(&models));
     let o = Command::new(bin()).args(&train).output().unwrap();
     assert!(o.status.success(), "train resumed: {}", stderr(&o));
@@ -491,7 +506,8 @@ fn train_and_sample_stop_on_a_signal_and_end_like_an_uninterrupted_run() {
     let ref_models = reference.join("models");
     let sample = ["sample", exemplar.to_str().unwrap(), "--models", ref_models.to_str().unwrap(), "-n", SLOW_N, "-o", out.to_str().unwrap()];
     let child = Command::new(bin()).args(sample).arg("-q").stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
-    std::thread::sleep(Duration::from_millis(1200));
+    // Stopped once sampling holds its output folder (its lock is taken).
+    assert!(wait_for(&out.join(".shapeshifter.lock"), Duration::from_secs(60)), "sampling never started");
     let (status, err, _) = stop(child, libc::SIGINT);
     assert_eq!(status.code(), Some(130), "sample: {err}");
     assert!(temporaries(&out).is_empty(), "sample: {:?}", temporaries(&out));
