@@ -323,6 +323,23 @@ fn an_edit_regenerated_and_kept_is_a_variant_folder_that_differs_where_it_was_ed
     assert_eq!(status, 400);
     assert!(error_line(&v).contains("already kept as variant_002"));
 
+    // A variant sampled in a longer box keeps its extent when kept: eval
+    // judges it against the exemplar at that extent, as sampling did.
+    let (status, job) = s.post("/api/jobs", json!({"kind": "sample", "n": 1, "extent": [1.25, 1, 1]}));
+    assert_eq!(status, 202, "{job}");
+    let job = s.finish(job["id"].as_str().unwrap());
+    assert_eq!(job["state"], "done", "{job}");
+    let longer = job["outputs"][0].as_str().expect("the sampled shape").to_string();
+    let (status, job) = s.post("/api/jobs", json!({"kind": "keep", "shape": longer}));
+    assert_eq!(status, 202, "{job}");
+    assert_eq!(s.finish(job["id"].as_str().unwrap())["state"], "done");
+    let extent: Value = serde_json::from_slice(&std::fs::read(s.run.join("variants/variant_003/extent.json")).expect("extent.json kept")).unwrap();
+    assert_eq!(extent["extent"], json!([1.25, 1.0, 1.0]), "{extent}");
+    let (_, state) = s.get("/api/state");
+    if let Some(f) = state["jobs"].as_array().unwrap().iter().find(|j| j["kind"] == "finish" && j["state"] != "done") {
+        assert_eq!(s.finish(f["id"].as_str().unwrap())["state"], "done");
+    }
+
     // A later `run` with more variants leaves the kept folder as it is.
     let (code, _, run, _dir) = s.signal(libc::SIGINT, Duration::from_secs(10));
     assert_eq!(code, Some(130));
