@@ -46,7 +46,7 @@ endef
 # for it); `make test-slow` builds every target, the benchmarks and tools
 # included, so they keep compiling (CI runs it).
 test: setup
-	bash scripts/usd-venv.sh > /dev/null
+	bash scripts/venv.sh usd-venv "usd-core==26.11" > /dev/null
 	cargo test --release $(CARGO_FEATURES) --lib --test suite --no-run
 	cargo build --release $(CARGO_FEATURES) --example encode_mesh --example read_level
 	$(call run_tests,--lib --test suite,)

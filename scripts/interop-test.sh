@@ -81,20 +81,8 @@ blender -b --factory-startup --python-exit-code 1 --python "$ROOT/scripts/intero
 
 # --- USD: Pixar's usd-core and Blender's USD importer ----------------------------
 # usd-core from PyPI in a virtual environment of its own in the cache folder
-# (a second run reuses it).
-CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
-# venv DIR PACKAGE...: a virtual environment holding PACKAGE..., made once.
-venv() {
-  local dir=$1; shift
-  if [ ! -f "$dir/.complete" ]; then
-    echo "interop: installing $* into $dir" >&2
-    rm -rf "$dir"
-    /usr/bin/python3 -m venv "$dir"
-    "$dir/bin/pip" install -q "$@"
-    touch "$dir/.complete"
-  fi
-}
-USD_VENV="$(dirname "$(dirname "$(bash "$ROOT/scripts/usd-venv.sh")")")"
+# (scripts/venv.sh: made once, the one `make test` uses).
+USD_VENV=$(bash "$ROOT/scripts/venv.sh" usd-venv "usd-core==26.11")
 [ -s "$WORK/run/variants.usda" ] || { echo "interop: the run wrote no variants.usda" >&2; exit 1; }
 # Surface voxels of each variant's finest level, counted by pyopenvdb (not by us).
 /usr/bin/python3 - "$WORK/run" > "$WORK/usd_counts.json" <<'PY'
@@ -123,8 +111,7 @@ if [ -f "$DEFAULT_DIR/mesh_basecolor.png" ]; then TRIANGLES=$(grep -c '^f ' "$DE
 else TRIANGLES=$(sed -n 's/^element face \([0-9]*\).*/\1/p' "$DEFAULT_DIR/mesh.ply" | head -1); fi
 # Debian 12's Blender 3.4 is built without USD: Blender as a Python module
 # (PyPI's bpy 4.2) in a virtual environment of its own.
-BPY_VENV="$CACHE/bpy-venv"
-venv "$BPY_VENV" "bpy==4.2.0"
+BPY_VENV=$(bash "$ROOT/scripts/venv.sh" bpy-venv "bpy==4.2.0")
 "$BPY_VENV/bin/python" "$ROOT/scripts/interop/blender_usd.py" \
   "$WORK/run/variants.usda" "$TRIANGLES" "$OUT/usd_blender.png" > "$WORK/blender_usd.out" 2>&1 || {
   echo "interop: Blender's USD import failed:" >&2; tail -20 "$WORK/blender_usd.out" >&2; exit 1; }

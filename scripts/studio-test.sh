@@ -12,8 +12,6 @@ set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BIN=$ROOT/target/release/shapeshifter
 OUT=${STUDIO_OUT:-$ROOT/out/studio-test}
-CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
-VENV=$CACHE/browser-venv
 
 need=()
 [ -x /usr/bin/chromium ] || need+=(chromium)
@@ -24,13 +22,7 @@ if ((${#need[@]})); then
   $SUDO apt-get update -q
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q "${need[@]}" > /dev/null
 fi
-if [ ! -f "$VENV/.complete" ]; then
-  echo "studio-test: installing selenium into $VENV" >&2
-  rm -rf "$VENV"
-  /usr/bin/python3 -m venv "$VENV"
-  "$VENV/bin/pip" install -q "selenium>=4.20,<5"
-  touch "$VENV/.complete"
-fi
+VENV=$(bash "$ROOT/scripts/venv.sh" browser-venv "selenium>=4.20,<5")
 [ -x "$BIN" ] || { echo "studio-test: build first (make build)" >&2; exit 1; }
 
 WORK=$(mktemp -d)

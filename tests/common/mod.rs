@@ -125,7 +125,7 @@ pub fn tiny_trained_run() -> &'static Path {
 }
 
 /// The Python of the usd-core virtual environment `make test` installs
-/// (`scripts/usd-venv.sh`), where it is complete; else the test is recorded
+/// (`scripts/venv.sh usd-venv`), where it is complete; else the test is recorded
 /// as skipped ([`skip`]).
 pub fn usd_core_python() -> Option<PathBuf> {
     let cache = std::env::var_os("SHAPESHIFTER_CACHE").map(PathBuf::from).unwrap_or_else(|| {
@@ -138,7 +138,7 @@ pub fn usd_core_python() -> Option<PathBuf> {
     if venv.join(".complete").is_file() {
         return Some(venv.join("bin/python"));
     }
-    skip(&format!("usd-core is not installed in {} (`make test` installs it: scripts/usd-venv.sh)", venv.display()));
+    skip(&format!("usd-core is not installed in {} (`make test` installs it: scripts/venv.sh)", venv.display()));
     None
 }
 
