@@ -1,13 +1,13 @@
 //! Whether encoded exemplars are figures, the reading that decides whether
 //! sampling may bend them (`sample.bend_exemplars = "figures"`): the normal
 //! spread and the upright share of each one's structure level (48^3 to 64^3), see
-//! `shapeshifter::level::figure`.
+//! `shapeshifter::judge::figure`.
 //!
 //! `cargo run --release --example figure_reading -- ENCODED_DIR...` (folders
 //! written by `shapeshifter encode`, e.g. `encode MESHES... --finest 64 -o DIR`
 //! and then `DIR/*`)
 
-use shapeshifter::level::figure::FigureReading;
+use shapeshifter::judge::figure::FigureReading;
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {

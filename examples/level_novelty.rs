@@ -8,7 +8,7 @@
 //! (`NOVELTY_PR=1`: also the precision, what of the variant the exemplar
 //! has, and the recall, what of the exemplar the variant has)
 
-use shapeshifter::level::structure::Matching;
+use shapeshifter::judge::Matching;
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {

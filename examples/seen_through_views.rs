@@ -5,7 +5,7 @@
 //!
 //! `cargo run --release --example seen_through_views -- EXEMPLAR/level_2.vdb VARIANT/level_2.vdb ...`
 
-use shapeshifter::level::seen_through::{seen_through, seen_through_excess, AZIMUTHS};
+use shapeshifter::judge::seen_through::{seen_through, seen_through_excess, AZIMUTHS};
 
 fn main() -> anyhow::Result<()> {
     let files: Vec<String> = std::env::args().skip(1).collect();

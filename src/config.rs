@@ -340,7 +340,7 @@ pub struct SampleConfig {
     /// Where the exemplar is a height field without a hole through it (a
     /// terrain, a cliff), every level sampled or transferred has its holes
     /// through the sheet and cracks at its steps closed before the next level is made
-    /// (`level::height_field::mend_sheet`); other exemplars are not touched.
+    /// (`level::sheet::mend_sheet`); other exemplars are not touched.
     /// Not written when off.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub mend_sheets: bool,
@@ -364,7 +364,7 @@ pub struct SampleConfig {
     pub bend_voxels: f64,
     /// Which exemplars `bend_voxels` bends: `figures` (the profiles'), only
     /// an exemplar whose surface faces every way, with no flat faces and no
-    /// walls standing along an axis (`level::figure`: a bent wall leans and
+    /// walls standing along an axis (`judge::figure`: a bent wall leans and
     /// a bent plate warps, neither a ruin's nor a part's style); `all`, any.
     /// Not written when `figures`.
     #[serde(default, skip_serializing_if = "BendExemplars::is_figures")]
@@ -387,7 +387,7 @@ pub struct SampleConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum BendExemplars {
-    /// Those [`crate::level::figure::FigureReading`] reads as figures.
+    /// Those [`crate::judge::figure::FigureReading`] reads as figures.
     #[default]
     Figures,
     /// Any exemplar.

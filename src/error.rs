@@ -23,20 +23,12 @@ pub enum Error {
     Cancelled,
     #[error(transparent)]
     Torch(#[from] tch::TchError),
+    /// A stage's own error (encoding, rendering, the sparse grid and
+    /// tensors, meshing, the detail transfer, a degenerate shape): each
+    /// stage converts its error type into this one where it is defined
+    /// ([`stage_error!`]), so this base module imports no stage.
     #[error(transparent)]
-    Encode(#[from] crate::encode::EncodeError),
-    #[error(transparent)]
-    Render(#[from] crate::render::RenderError),
-    #[error(transparent)]
-    Grid(#[from] crate::learn::grid::GridError),
-    #[error(transparent)]
-    Sparse(#[from] crate::learn::sparse::SparseError),
-    #[error(transparent)]
-    Recon(#[from] crate::recon::ReconError),
-    #[error(transparent)]
-    Transfer(#[from] crate::transfer::TransferError),
-    #[error(transparent)]
-    Shape(#[from] crate::eval::metrics::DegenerateShape),
+    Stage(Box<dyn std::error::Error + Send + Sync + 'static>),
 }
 
 impl Error {
@@ -79,6 +71,18 @@ pub fn one_line(message: &str) -> String {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// `From<$stage_error> for Error`, written beside the stage's error type.
+#[macro_export]
+macro_rules! stage_error {
+    ($t:ty) => {
+        impl From<$t> for $crate::error::Error {
+            fn from(e: $t) -> Self {
+                $crate::error::Error::Stage(Box::new(e))
+            }
+        }
+    };
+}
 
 #[cfg(test)]
 mod tests {

@@ -32,6 +32,7 @@ pub mod eval;
 pub mod geom;
 pub mod grid;
 pub mod io;
+pub mod judge;
 pub mod learn;
 pub mod level;
 pub mod pipeline;

@@ -62,11 +62,11 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
     let torn_flags = &torn.structure.as_ref().expect("structure measured").flags;
     // A slit along the height shows the inside: the visibility measure sees it.
     let slit = get(Rung::Slit).structure.as_ref().expect("structure measured");
-    assert!(slit.flags.contains(&shapeshifter::level::structure::Flag::SeenThrough), "{:?} excess {}", slit.flags, slit.seen_through_excess);
-    assert!(torn_flags.contains(&shapeshifter::level::structure::Flag::Torn), "{torn_flags:?}");
+    assert!(slit.flags.contains(&shapeshifter::judge::Flag::SeenThrough), "{:?} excess {}", slit.flags, slit.seen_through_excess);
+    assert!(torn_flags.contains(&shapeshifter::judge::Flag::Torn), "{torn_flags:?}");
     // A wall fallen outward: its surface is like no part of the exemplar.
     let fallen = get(Rung::FallenWall).structure.as_ref().expect("structure measured");
-    assert!(fallen.flags.contains(&shapeshifter::level::structure::Flag::OutOfStyle), "{:?} unlike {}", fallen.flags, fallen.unlike_share);
+    assert!(fallen.flags.contains(&shapeshifter::judge::Flag::OutOfStyle), "{:?} unlike {}", fallen.flags, fallen.unlike_share);
     let flags = outcome.evaluation.report.structure.as_ref().expect("structure measured");
     assert!(flags.near_copies >= 1 && flags.whole < flags.scored, "{flags:?}");
     assert!(out.join("contact_sheet.png").is_file() && out.join("ladder.json").is_file());

@@ -158,10 +158,10 @@ fn glb_reads_back_through_the_gltf_crate() {
     // COLOR_0 is linear: red stays (1, 0, 0), the blue is sRGB-decoded.
     let read: Vec<Vec3> = reader.read_colors(0).unwrap().into_rgb_f32().map(Vec3::from).collect();
     for (got, want) in read.iter().zip(colours(&sphere)) {
-        let linear = Vec3::from_array(want.to_array().map(shapeshifter::io::glb::srgb_to_linear));
+        let linear = Vec3::from_array(want.to_array().map(shapeshifter::geom::colour::srgb_to_linear));
         assert!((*got - linear).abs().max_element() < 1e-6, "{got} vs {linear}");
     }
-    assert!((shapeshifter::io::glb::srgb_to_linear(0.5) - 0.2140).abs() < 1e-3);
+    assert!((shapeshifter::geom::colour::srgb_to_linear(0.5) - 0.2140).abs() < 1e-3);
     let indices: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
     assert_eq!(indices, sphere.triangles.iter().flatten().copied().collect::<Vec<_>>());
     // A mesh without colours has no COLOR_0.

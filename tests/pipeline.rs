@@ -270,7 +270,7 @@ fn sampling_is_reproducible_and_follows_options() {
     };
     let first_opts = SampleOptions { level0_candidates: 1, level0_pick: shapeshifter::config::Level0Pick::First, ..novel_opts.clone() };
     let (novel, first) = (sample(&models, &levels, &novel_opts, None).unwrap(), sample(&models, &levels, &first_opts, None).unwrap());
-    let likeness = |v: &[Vec<Level>]| v.iter().map(|l| shapeshifter::level::structure::tolerant_fscore(&l[0], &levels[0])).collect::<Vec<f64>>();
+    let likeness = |v: &[Vec<Level>]| v.iter().map(|l| shapeshifter::judge::tolerant_fscore(&l[0], &levels[0])).collect::<Vec<f64>>();
     let (ln, lf) = (likeness(&novel), likeness(&first));
     let new_enough = shapeshifter::learn::sample::NEW_ENOUGH_LEVEL0_FSCORE;
     for ((n, f), (nv, fv)) in ln.iter().zip(&lf).zip(novel.iter().zip(&first)) {
@@ -347,7 +347,7 @@ fn sampling_is_reproducible_and_follows_options() {
 /// the first by the structure score.
 #[test]
 fn level0_rejection_keeps_the_best_candidate() {
-    use shapeshifter::level::structure::{Structure, StructureParams, StructureScores};
+    use shapeshifter::judge::{Structure, Thresholds, Verdict};
     let _guard = serial();
     let config = tiny(&["train.level0_iterations=30", "train.upper_iterations=10", "train.upsampler_iterations=10"]);
     let dir = tempfile::tempdir().unwrap();
@@ -365,7 +365,7 @@ fn level0_rejection_keeps_the_best_candidate() {
         if l.is_empty() {
             0.0
         } else {
-            StructureScores::new(l, &Structure::of(l), &levels[0], &ex, &StructureParams::default()).score
+            Verdict::new(l, &Structure::of(l), &levels[0], &ex, &Thresholds::default()).score
         }
     };
     let mut better = 0;

@@ -8,9 +8,10 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use shapeshifter::level::height_field;
+use shapeshifter::judge::sheet as height_field;
+use shapeshifter::level::sheet::{enclosed_columns, step_cracks};
 use glam::Vec3;
-use shapeshifter::level::structure::{structure_level, unlike_voxels, Matching, Structure, StructureParams, StructureScores, STRUCTURE_RESOLUTION};
+use shapeshifter::judge::{structure_level, unlike_voxels, Matching, Structure, Thresholds, Verdict, STRUCTURE_RESOLUTION};
 
 /// Prints mass and extent ratios, pieces, loose pieces (`loose`: how many
 /// pieces are under the flags' piece share, and their share of the voxels:
@@ -43,7 +44,7 @@ struct Args {
 fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let (_, levels) = shapeshifter::io::dataset::read(&args.exemplar)?;
-    let params = StructureParams::default();
+    let params = Thresholds::default();
     // Where the exemplar is a sheet (decided at 64^3, as sampling decides),
     // its holes and cracks at steps at every level probed.
     let sheet = structure_level(&levels).and_then(height_field::sheet_axis);
@@ -74,11 +75,11 @@ fn main() -> anyhow::Result<()> {
                 shapeshifter::io::vdb::write_level(&out.join(format!("level_{}.vdb", ex.index)), &painted, &provenance, Default::default())?;
             }
             let (vs, es) = (Structure::of(&v), Structure::of(ex));
-            let s = StructureScores::new(&v, &vs, ex, &es, &params);
+            let s = Verdict::new(&v, &vs, ex, &es, &params);
             let (gone, added) = Matching::of(&v, ex).gone_and_added();
             if std::env::var("PROBE_RAW").is_ok() { eprintln!("raw enclosure {} vs {}", vs.enclosure, es.enclosure); }
             let (holes, cracks) = match sheet {
-                Some(a) => (height_field::enclosed_columns(&v, a).len().to_string(), height_field::step_cracks(&v, a).to_string()),
+                Some(a) => (enclosed_columns(&v, a).len().to_string(), step_cracks(&v, a).to_string()),
                 None => ("-".into(), "-".into()),
             };
             let loose = vs.components.len() - vs.pieces();

@@ -173,6 +173,8 @@ pub enum EncodeError {
     Cloud { name: String, reason: String },
 }
 
+crate::stage_error!(EncodeError);
+
 /// Wall-clock seconds per stage and sizes, for logs and benchmarks.
 #[derive(Clone, Debug, Default)]
 pub struct EncodeStats {

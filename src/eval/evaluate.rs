@@ -36,7 +36,7 @@ pub struct VariantFiles {
     /// The finest level of at most [`STRUCTURE_RESOLUTION`]^3.
     pub structure: Option<Level>,
     /// The level after the structure level (128^3), if the variant has one
-    /// below its finest ([`crate::level::structure::fine_level`]); the
+    /// below its finest ([`crate::judge::fine_level`]); the
     /// finest itself where that is the one.
     pub fine: Option<Level>,
     pub mesh: Option<Mesh>,
@@ -48,7 +48,7 @@ pub struct VariantFiles {
     pub extent: Option<crate::level::resize::Extent>,
 }
 
-pub use crate::level::structure::STRUCTURE_RESOLUTION;
+pub use crate::judge::STRUCTURE_RESOLUTION;
 
 /// The `level_K.vdb` files of a folder, coarsest first (none read).
 pub fn level_files(dir: &Path) -> Result<Vec<(usize, PathBuf)>> {
@@ -90,8 +90,8 @@ pub fn read_variant(dir: &Path) -> Result<VariantFiles> {
     }
     let coarsest = coarse_levels.first().cloned().unwrap_or_else(|| finest.clone());
     let read: Vec<Level> = coarse_levels.into_iter().chain(std::iter::once(finest.clone())).collect();
-    let structure = crate::level::structure::structure_level(&read).cloned();
-    let fine = crate::level::structure::fine_level(&read).cloned();
+    let structure = crate::judge::structure_level(&read).cloned();
+    let fine = crate::judge::fine_level(&read).cloned();
     let mesh_path = dir.join("mesh.ply");
     let mesh = if mesh_path.is_file() { Some(mesh::load(&mesh_path)?) } else { None };
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -189,7 +189,7 @@ pub fn evaluate(
         return Err(Error::Invalid("no variants to evaluate".into()));
     }
     let (_, levels) = dataset::read(exemplar_dir)?;
-    let ex_structure = crate::level::structure::structure_level(&levels);
+    let ex_structure = crate::judge::structure_level(&levels);
     let (Some(ex_coarse), Some(ex_fine)) = (levels.first(), levels.last()) else {
         return Err(Error::file(exemplar_dir, "manifest lists no levels"));
     };
@@ -273,7 +273,7 @@ pub fn evaluate(
         })
         .collect::<Result<_>>()?;
     // And its fine level, to compare each variant's with (bent likewise).
-    let ex_fine_level = crate::level::structure::fine_level(&levels);
+    let ex_fine_level = crate::judge::fine_level(&levels);
     let fine_references: Vec<Option<std::borrow::Cow<Level>>> = variants
         .iter()
         .map(|v| {

@@ -640,7 +640,7 @@ const GEOMETRY_RUNGS: &[Rung] = &[Rung::SmoothWeak, Rung::SmoothStrong, Rung::Bl
 const STRUCTURE_RUNGS: &[Rung] = &[Rung::Fragment, Rung::Torn, Rung::Shrunken, Rung::Slit, Rung::RoofStrip, Rung::FallenWall];
 
 /// A structure figure of a row; NaN (fails every check) when not measured.
-fn structure(v: &VariantScores, f: fn(&crate::level::structure::StructureScores) -> f64) -> f64 {
+fn structure(v: &VariantScores, f: fn(&crate::judge::Verdict) -> f64) -> f64 {
     v.structure.as_ref().map_or(f64::NAN, f)
 }
 
@@ -674,10 +674,10 @@ pub fn expectations() -> Vec<Expectation> {
         e("structure.mass_ratio (distance from 1)", |v: &VariantScores| structure(v, |s| (s.mass_ratio - 1.0).abs()), false, m10, &[Fragment, Shrunken], false, false),
         e("structure.extent_ratio (distance from 1)", |v: &VariantScores| structure(v, |s| (s.extent_ratio - 1.0).abs()), false, m10, &[Fragment, Shrunken], false, false),
         e("structure.free_boundary", |v: &VariantScores| structure(v, |s| s.free_boundary), false, |ex| {
-            structure(ex, |s| crate::level::structure::StructureParams::default().free_boundary_limit(s.free_boundary) - s.free_boundary)
+            structure(ex, |s| crate::judge::Thresholds::default().free_boundary_limit(s.free_boundary) - s.free_boundary)
         }, &[Fragment, Torn], false, false),
         e("structure.seen_through_excess", |v: &VariantScores| structure(v, |s| s.seen_through_excess), false, |_| {
-            crate::level::structure::StructureParams::default().max_seen_through_excess
+            crate::judge::Thresholds::default().max_seen_through_excess
         }, &[Slit, RoofStrip], false, false),
         e("colour.fscore", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.fscore), true, m10, &[WashedOut, ShuffledColours, Blob, Untrained], false, true),
         e("colour.precision", |v: &VariantScores| v.colour.as_ref().map_or(f64::NAN, |c| c.precision), true, m10, &[WashedOut, ShuffledColours, Untrained], false, true),
@@ -751,7 +751,7 @@ pub fn check(rows: &[VariantScores], colourful: bool) -> Vec<CheckResult> {
 /// surface is like no part of the exemplar's there: `fine_out_of_style` is
 /// allowed on those rungs, and is what it should say.
 pub fn check_flags(rows: &[VariantScores]) -> Vec<CheckResult> {
-    use crate::level::structure::Flag;
+    use crate::judge::Flag;
     use Rung::*;
     let expected: [(Rung, Option<Flag>, &str); 11] = [
         (Exemplar, Some(Flag::NearCopy), "flagged near_copy, nothing broken"),

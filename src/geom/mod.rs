@@ -1,5 +1,6 @@
 //! Geometry shared by several stages.
 
+pub mod colour;
 pub mod edges;
 pub mod nearest;
 pub mod normals;

@@ -7,9 +7,9 @@
 //! (encode, learn, transfer, recon, eval, edit); it imports nothing of theirs
 //! (only `patches`' tests borrow eval's test shapes and voxeliser).
 
+pub mod components;
 pub mod key;
 pub mod occupancy;
-pub mod patches;
 pub mod transform;
 
 pub use key::{VoxelIndex, VoxelMap};

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use crate::error::{Error, Result};
 use crate::io::helper;
-use crate::io::mesh::Mesh;
+use crate::io::mesh_data::Mesh;
 
 pub const ASSIMP_PROGRAM: &str = "shapeshifter-assimp";
 pub const ASSIMP_ENV: &str = "SHAPESHIFTER_ASSIMP";

@@ -7,7 +7,7 @@
 //! 1. POSITION: float VEC3 with its min/max (glTF requires the bounds);
 //! 2. NORMAL: float VEC3, unit length (area-weighted vertex normals);
 //! 3. COLOR_0 (only for a coloured mesh): float VEC3, linear (see
-//!    [`srgb_to_linear`]);
+//!    [`crate::geom::colour::srgb_to_linear`]);
 //! 4. TEXCOORD_0 (only for a textured mesh): float VEC2, v = 0 the image's
 //!    top row (glTF's convention), vertices split where corners' UVs differ;
 //! 5. indices: unsigned int SCALAR, 3 per triangle;
@@ -24,37 +24,9 @@ use glam::Vec3;
 use gltf::json::{self, validation::Checked::Valid, validation::USize64};
 
 use crate::error::{Error, Result};
-use crate::io::mesh::Mesh;
+use crate::geom::colour::srgb_to_linear;
+use crate::io::mesh_data::Mesh;
 
-/// `texel` (sRGB) times `tint` (sRGB) in linear light, as sRGB: glTF's base
-/// colour is the product of the factor, COLOR_0 and the texture, all linear.
-pub fn tint(texel: Vec3, tint: Vec3) -> Vec3 {
-    let lin = |v: Vec3| Vec3::new(srgb_to_linear(v.x), srgb_to_linear(v.y), srgb_to_linear(v.z));
-    let c = lin(texel) * lin(tint);
-    Vec3::new(linear_to_srgb(c.x), linear_to_srgb(c.y), linear_to_srgb(c.z))
-}
-
-/// Inverse of [`srgb_to_linear`].
-pub fn linear_to_srgb(c: f32) -> f32 {
-    let c = c.clamp(0.0, 1.0);
-    if c <= 0.003_130_8 {
-        c * 12.92
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-/// An sRGB-encoded colour channel in [0,1] to linear light (the IEC 61966-2-1
-/// curve). Our colours are display values, like the bytes of a PLY, while
-/// glTF's COLOR_0 is linear: without this a viewer would show them too light.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    let c = c.clamp(0.0, 1.0);
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
 
 /// Appends a tightly packed buffer view of `values` (little-endian 4-byte
 /// words) to `bin`, and an accessor of `count` elements of `type_` over it.
@@ -118,8 +90,8 @@ fn split_at_uv_seams(mesh: &Mesh, uvs: &[glam::Vec2]) -> (Mesh, Vec<glam::Vec2>)
         })
         .collect();
     let colours = match mesh.vertex_colours() {
-        Some(c) => crate::io::mesh::MeshColours::PerVertex(from.iter().map(|&i| c[i]).collect()),
-        None => crate::io::mesh::MeshColours::None,
+        Some(c) => crate::io::mesh_data::MeshColours::PerVertex(from.iter().map(|&i| c[i]).collect()),
+        None => crate::io::mesh_data::MeshColours::None,
     };
     (Mesh { name: mesh.name.clone(), positions, triangles, colours, texture: None }, out_uvs)
 }

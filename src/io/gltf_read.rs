@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use base64::Engine;
 use glam::{Mat4, Vec2, Vec3};
 
-use crate::io::mesh::{Mesh, MeshColours, Texture, Wrap, NO_IMAGE};
+use crate::io::mesh_data::{Mesh, MeshColours, Texture, Wrap, NO_IMAGE};
 
 /// Extensions whose data the reader cannot decode.
 const UNSUPPORTED: &[(&str, &str)] = &[
@@ -142,9 +142,9 @@ pub fn read(bytes: &[u8], dir: &Path, name: &str) -> Result<Mesh, String> {
                 for &i in &t {
                     let c = vertex_colour.as_ref().map_or(Vec3::ONE, |c| c[i as usize]) * factor;
                     out.colours.push(Vec3::new(
-                        crate::io::glb::linear_to_srgb(c.x),
-                        crate::io::glb::linear_to_srgb(c.y),
-                        crate::io::glb::linear_to_srgb(c.z),
+                        crate::geom::colour::linear_to_srgb(c.x),
+                        crate::geom::colour::linear_to_srgb(c.y),
+                        crate::geom::colour::linear_to_srgb(c.z),
                     ));
                     out.uvs.push(uvs.as_ref().map_or(Vec2::ZERO, |u| u[i as usize]));
                 }
@@ -420,10 +420,10 @@ fn weld(mut mesh: Mesh) -> Mesh {
             })
         })
         .collect();
-    if let crate::io::mesh::MeshColours::PerVertex(c) = &mesh.colours {
+    if let crate::io::mesh_data::MeshColours::PerVertex(c) = &mesh.colours {
         // Per-vertex colours (not what the glTF reader gives) as corners.
         let corners = mesh.triangles.iter().flat_map(|t| t.map(|i| c[i as usize])).collect();
-        mesh.colours = crate::io::mesh::MeshColours::PerCorner(corners);
+        mesh.colours = crate::io::mesh_data::MeshColours::PerCorner(corners);
     }
     for t in &mut mesh.triangles {
         *t = t.map(|i| remap[i as usize]);

@@ -14,6 +14,7 @@ pub mod helper;
 pub(crate) mod gltf_read;
 pub mod info;
 pub mod mesh;
+pub mod mesh_data;
 pub mod poisson;
 pub(crate) mod mesh_check;
 pub(crate) mod obj;

@@ -241,9 +241,9 @@ pub fn texture_path(obj: &Path) -> std::path::PathBuf {
 /// `X_basecolor.png`), each atomically, the image and material first so an
 /// `.obj` never names a file that is not there. Corners carry `v/vt/vn`;
 /// one `vt` per corner (OBJ's v = 0 is the image's bottom row, as in
-/// [`Texture`](crate::io::mesh::Texture)); the material is matte, its
+/// [`Texture`](crate::io::mesh_data::Texture)); the material is matte, its
 /// `map_Kd` the image.
-pub fn write_textured(mesh: &crate::io::mesh::Mesh, path: &Path) -> crate::error::Result<()> {
+pub fn write_textured(mesh: &crate::io::mesh_data::Mesh, path: &Path) -> crate::error::Result<()> {
     use std::fmt::Write as _;
     use crate::error::Error;
     let tex = mesh.texture.as_ref().ok_or_else(|| Error::file(path, "the mesh has no texture"))?;

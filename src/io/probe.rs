@@ -47,8 +47,22 @@ pub fn probe(path: &Path, names: &[&str]) -> Result<()> {
     match (ended.status.code(), ended.status.signal()) {
         (_, Some(sig)) => Err(Error::file(path, format!("OpenVDB's reader crashed on it (signal {sig}): damaged .vdb file"))),
         (Some(0), _) => Ok(()),
-        (Some(1), _) => Err(Error::file(path, crate::io::vdb::read_failure(&ended.said))),
+        (Some(1), _) => Err(Error::file(path, read_failure(&ended.said))),
         (Some(c), _) => Err(Error::file(path, format!("the .vdb probe {} failed (exit status {c})", program.display()))),
         (None, None) => Err(Error::file(path, "the .vdb probe ended without a status")),
+    }
+}
+
+/// OpenVDB's message for a file it could not read, with what it usually
+/// means: a cut-off file makes OpenVDB read garbage as the next grid's type
+/// name and report "Grid type is not registered" (a whole file with a grid
+/// type this build of OpenVDB lacks says the same).
+pub(crate) fn read_failure(what: &str) -> String {
+    if what.contains("not registered") {
+        format!("truncated or damaged level file, or a grid type OpenVDB 10 does not know (OpenVDB: {what})")
+    } else if what.contains("end of file") || what.contains("EOF") {
+        format!("truncated or damaged level file (OpenVDB: {what})")
+    } else {
+        what.to_string()
     }
 }

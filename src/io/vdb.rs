@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::util::fs::{check_input_file, write_atomically};
 use crate::io::ffi::bridge::{self, GridSummary, LevelData, MetaEntry, MetaKind};
+use crate::io::probe::read_failure;
 use crate::grid::transform::{Frame, Up};
 use crate::level::Level;
 
@@ -248,16 +249,3 @@ pub fn summarise(path: &Path) -> Result<Vec<GridSummary>> {
     bridge::summarise_vdb_file(path_str).map_err(|e| Error::file(path, read_failure(e.what())))
 }
 
-/// OpenVDB's message for a file it could not read, with what it usually
-/// means: a cut-off file makes OpenVDB read garbage as the next grid's type
-/// name and report "Grid type is not registered" (a whole file with a grid
-/// type this build of OpenVDB lacks says the same).
-pub(crate) fn read_failure(what: &str) -> String {
-    if what.contains("not registered") {
-        format!("truncated or damaged level file, or a grid type OpenVDB 10 does not know (OpenVDB: {what})")
-    } else if what.contains("end of file") || what.contains("EOF") {
-        format!("truncated or damaged level file (OpenVDB: {what})")
-    } else {
-        what.to_string()
-    }
-}

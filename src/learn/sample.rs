@@ -6,7 +6,7 @@
 //!    `level0_sampler`; prune (mask > 0 kept, mask set to 1). With
 //!    `level0_candidates` > 1, level-0 shapes are drawn, each from its own
 //!    noise; of those whose structure against the exemplar's level 0
-//!    ([`crate::level::structure`]) scores at least `level0_min_structure`,
+//!    ([`crate::judge`]) scores at least `level0_min_structure`,
 //!    and that lost no part (cut short, or a thin part gone: counted at 16^3
 //!    and again at 32^3 after the level-1 upsampler alone),
 //!    the first is kept, or with `level0_pick = novel` the least like the
@@ -24,7 +24,7 @@
 //!    the exemplar bent at random, every level ([`crate::level::warp`]),
 //!    judged against the exemplar except for the inside seen and the
 //!    out-of-style patches, which are judged against the exemplar bent the
-//!    same way ([`StructureScores::against_bend`]); the variant's bend is
+//!    same way ([`Verdict::against_bend`]); the variant's bend is
 //!    returned with its levels. Continuing from a level of a bent variant
 //!    (`from`) runs the networks: a continuation is not bent.
 //! 2. Level l >= 1: U_l of the previous pruned level (X_up plus the learned
@@ -55,7 +55,7 @@ use tch::{Device, Kind, Tensor};
 
 use crate::config::{BendExemplars, Config};
 use crate::learn::schedule::{reverse_step, reverse_times, FinalStep, Sampler, Schedule, TRAINING_PARAMETERISATION};
-use crate::level::structure::{thin_count, Against, Flag, Structure, StructureParams, StructureScores};
+use crate::judge::{thin_count, Against, Flag, Structure, Thresholds, Verdict};
 use crate::error::{Error, Result};
 use crate::learn::grid::SparseGrid;
 use crate::level::repair::LevelRepair;
@@ -63,7 +63,8 @@ use crate::level::{Level, FEATURE_CHANNELS};
 use crate::learn::nn::{new_diffusion, new_upsampler, DiffusionNet, LevelNet, Upsampler};
 use crate::learn::sparse::{clamp_to_feature_ranges, SparseTensor};
 use crate::learn::checkpoint::{diffusion_checkpoint, diffusion_ema_checkpoint, upsampler_checkpoint};
-use crate::level::figure::{FigureReading, MAX_UPRIGHT_SHARE, MIN_NORMAL_SPREAD, MIN_READING_RESOLUTION};
+use crate::judge::figure::FigureReading;
+use crate::judge::THRESHOLDS;
 use crate::level::resize::Extent;
 use crate::level::warp::Bend;
 use crate::util::seed::{derive_seed, Stream};
@@ -325,14 +326,14 @@ pub fn sample_observed(
             }
         }
     }
-    let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
+    let sheet_axes = crate::judge::sheet::sheet_axes(exemplar_levels);
     let continuing = from.is_some();
     let at_extent = AtExtent::of(exemplar_levels, Extent { extent: opts.extent }, sheet_axes[0], continuing)?;
     // Out-of-style patches are the exemplar's own at any extent.
     let style = if continuing || at_extent.extent.is_same() {
         None
     } else {
-        crate::level::structure::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)))
+        crate::judge::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)))
     };
     let copies_only = std::cell::Cell::new(false);
     let resized_whole = std::cell::Cell::new(false);
@@ -448,11 +449,11 @@ impl Bending {
         }
         let reading = FigureReading::of_exemplar(exemplar_levels);
         let (bending, why) = match reading {
-            None => (Bending::NotAFigure, format!("the exemplar has no level of {MIN_READING_RESOLUTION}^3 to 64^3 to read whether it is a figure: it is not bent")),
+            None => (Bending::NotAFigure, format!("the exemplar has no level of {}^3 to 64^3 to read whether it is a figure: it is not bent", THRESHOLDS.min_reading_resolution)),
             Some(r) => {
                 let figures = format!(
-                    "normal spread {:.2}, a figure's at least {MIN_NORMAL_SPREAD}; upright share {:.2}, a figure's at most {MAX_UPRIGHT_SHARE}",
-                    r.normal_spread, r.upright_share
+                    "normal spread {:.2}, a figure's at least {}; upright share {:.2}, a figure's at most {}",
+                    r.normal_spread, THRESHOLDS.min_normal_spread, r.upright_share, THRESHOLDS.max_upright_share
                 );
                 if r.is_figure() {
                     (Bending::Bends(opts.bend_voxels), format!("the exemplar is a figure ({figures}): a pass with nothing new at level 0 is the exemplar bent"))
@@ -480,7 +481,7 @@ struct AtExtent {
     level0: Level,
     structure0: Structure,
     /// Level 1 and its thin-part voxel count, where it has thin parts
-    /// enough to lose ([`StructureParams::min_exemplar_thin_share`]).
+    /// enough to lose ([`Thresholds::min_exemplar_thin_share`]).
     thin1: Option<(Level, usize)>,
     reference: Option<(Level, Structure)>,
 }
@@ -506,12 +507,12 @@ impl AtExtent {
                 let level = extent.of(levels, 1)?;
                 let thin = thin_count(&level);
                 let surface = level.mask.iter().filter(|&&m| m > 0.0).count();
-                let enough = thin > 0 && thin as f64 >= StructureParams::default().min_exemplar_thin_share * surface as f64;
+                let enough = thin > 0 && thin as f64 >= Thresholds::default().min_exemplar_thin_share * surface as f64;
                 enough.then_some((level, thin))
             }
             None => None,
         };
-        let reference = match crate::level::structure::structure_level(levels) {
+        let reference = match crate::judge::structure_level(levels) {
             Some(l) => {
                 let level = extent.of(levels, l.index)?;
                 let structure = Structure::of(&level);
@@ -551,7 +552,7 @@ pub struct AttemptRank {
     pub whole: bool,
     /// Not a near copy of the exemplar.
     pub new: bool,
-    /// [`StructureScores::score`].
+    /// [`Verdict::score`].
     pub score: f64,
 }
 
@@ -765,13 +766,13 @@ impl Level0Pick {
 /// level 0: its structure score, whether it lost a part (`shrunken` or
 /// `thin_part_lost`), and its likeness (F-score, largest changed region). An
 /// empty candidate scores 0, has lost everything and is like nothing.
-fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params: &StructureParams) -> (f64, bool, (f64, f64)) {
+fn level0_gate(level: &Level, ex_level: &Level, ex_structure: &Structure, params: &Thresholds) -> (f64, bool, (f64, f64)) {
     if level.is_empty() {
         return (0.0, true, (0.0, 0.0));
     }
-    let s = StructureScores::new(level, &Structure::of(level), ex_level, ex_structure, params);
+    let s = Verdict::new(level, &Structure::of(level), ex_level, ex_structure, params);
     if log::log_enabled!(log::Level::Trace) {
-        let m = crate::level::structure::Matching::of(level, ex_level);
+        let m = crate::judge::Matching::of(level, ex_level);
         log::trace!("level 0 candidate: F {:.3}, change {:.3}, precision {:.3}, recall {:.3}", m.fscore(), m.largest_change(), m.precision(), m.recall());
     }
     let part_lost = s.flags.iter().any(|f| matches!(f, Flag::Shrunken | Flag::ThinPartLost));
@@ -809,7 +810,7 @@ impl OneVariant<'_> {
             }
         }
         let (ex_level, ex_structure) = (&self.at.level0, &self.at.structure0);
-        let params = StructureParams::default();
+        let params = Thresholds::default();
         let resized = !self.at.extent.is_same();
         let candidates = if resized { opts.level0_candidates.clamp(1, RESIZED_CANDIDATES) } else { opts.level0_candidates.max(1) };
         let policy = if resized { crate::config::Level0Pick::First } else { opts.level0_pick };
@@ -901,7 +902,7 @@ impl OneVariant<'_> {
     /// The variant: one coarse-to-fine pass from its seed, or with
     /// `attempts` > 1 (and no level to continue from), passes from new
     /// level-0 noise (attempt seeds) until one is whole at the structure
-    /// level ([`StructureScores`] flags); else the best (whole first, then
+    /// level ([`Verdict`] flags); else the best (whole first, then
     /// not a near copy, then by score). Attempts stop at the structure
     /// level; only the kept one goes on to the finer levels (continuing
     /// from a level reproduces the pass that made it, so the variant is the
@@ -956,7 +957,7 @@ impl OneVariant<'_> {
     /// a bent pass against its own pose; a resized one, or any pass of a
     /// resized sampling, against the exemplar at its extent, its style
     /// against the exemplar's own patches; else against the exemplar.
-    fn judged(&self, p: &Pass, level: &Level) -> Option<StructureScores> {
+    fn judged(&self, p: &Pass, level: &Level) -> Option<Verdict> {
         let own = self.style.or(self.at.reference())?;
         let at = p.resized.as_ref().unwrap_or(self.at).reference()?;
         // A bent pass's level is the exemplar's bent (and repaired): its own pose.
@@ -970,7 +971,7 @@ impl OneVariant<'_> {
             // In the exemplar's box, a level 0 that is the exemplar's makes a near copy.
             (None, false) => Against::Exemplar { level0: Some((&p.levels[0], &self.at.level0)) },
         };
-        Some(StructureScores::judged(level, own, against, None, &StructureParams::default()))
+        Some(Verdict::judged(level, own, against, None, &Thresholds::default()))
     }
 
     /// The pass [`keep_attempt`] keeps of `attempts`, its levels up to the
@@ -1282,15 +1283,15 @@ mod tests {
         // its height).
         let (exemplar, one_ear, _) = bunny_of_spheres(16);
         let e = Structure::of(&exemplar);
-        let p = StructureParams::default();
+        let p = Thresholds::default();
         assert_eq!(level0_gate(&exemplar, &exemplar, &e, &p), (1.0, false, (1.0, 0.0)));
         let (score, part_lost, (fscore, _)) = level0_gate(&one_ear, &exemplar, &e, &p);
-        let m = crate::level::structure::Matching::of(&one_ear, &exemplar);
+        let m = crate::judge::Matching::of(&one_ear, &exemplar);
         assert_eq!(fscore, m.fscore());
         // What the pick saw before: a passing score and "new enough".
-        let sc = StructureScores::new(&one_ear, &Structure::of(&one_ear), &exemplar, &e, &p);
+        let sc = Verdict::new(&one_ear, &Structure::of(&one_ear), &exemplar, &e, &p);
         assert!(score >= 0.8 && m.fscore() < NEW_ENOUGH_LEVEL0_FSCORE, "score {score}, F {}: {sc:?}", m.fscore());
-        assert!(!sc.flags.contains(&crate::level::structure::Flag::Shrunken), "{sc:?}");
+        assert!(!sc.flags.contains(&crate::judge::Flag::Shrunken), "{sc:?}");
         assert!(part_lost, "the ear is lost: thin voxels {} of {}: {sc:?}", Structure::of(&one_ear).thin, e.thin);
         assert!(!Level0Pick::new(Pick::Novel, 0.8).passes(score, part_lost));
         assert_eq!(level0_gate(&Level::default(), &exemplar, &e, &p), (0.0, true, (0.0, 0.0)));
@@ -1302,7 +1303,7 @@ mod tests {
         // the body is not.
         let (exemplar, one_ear, ball) = bunny_of_spheres(32);
         let (exemplar0, _, ball0) = bunny_of_spheres(16);
-        let p = StructureParams::default();
+        let p = Thresholds::default();
         let levels = [exemplar0.clone(), exemplar.clone()];
         let at = AtExtent::of(&levels, Extent::SAME, None, false).unwrap();
         assert!(at.thin1.is_some(), "the ears are thin parts");
@@ -1333,17 +1334,17 @@ mod tests {
         let at = AtExtent::of(&levels, extent, None, false).unwrap();
         let (ref_level, ref_structure) = at.reference().expect("a structure level");
         assert_eq!(ref_level.index, 1);
-        let p = StructureParams::default();
+        let p = Thresholds::default();
         let e = Structure::of(&exemplar);
         // The exemplar as long as the box: whole at its extent, and not the
         // exemplar's size.
         let long = extent.of(&levels, 1).unwrap();
-        let judged = StructureScores::at_extent(&long, &Structure::of(&long), (ref_level, ref_structure), (&exemplar, &e), &p);
+        let judged = Verdict::at_extent(&long, &Structure::of(&long), (ref_level, ref_structure), (&exemplar, &e), &p);
         assert!(judged.whole() && judged.extent_ratio > 0.99 && (judged.mass_ratio - 1.0).abs() < 0.01, "{judged:?}");
-        let plain = StructureScores::new(&long, &Structure::of(&long), &exemplar, &e, &p);
+        let plain = Verdict::new(&long, &Structure::of(&long), &exemplar, &e, &p);
         assert!(plain.score < 0.8, "against the exemplar's own box the size is off: {plain:?}");
         // The exemplar's own size in the longer box is cut short.
-        let short = StructureScores::at_extent(&exemplar, &e, (ref_level, ref_structure), (&exemplar, &e), &p);
+        let short = Verdict::at_extent(&exemplar, &e, (ref_level, ref_structure), (&exemplar, &e), &p);
         assert!(short.flags.contains(&Flag::Shrunken), "{short:?}");
     }
 }

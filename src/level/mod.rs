@@ -5,15 +5,10 @@
 //! offset (3), normal (3), colour (3), mask (1). See [`Channel`].
 
 pub mod edit;
-pub mod outline;
-pub mod figure;
 pub mod files;
-pub mod height_field;
 pub mod repair;
 pub mod resize;
-pub mod seen_through;
-pub mod steps;
-pub mod structure;
+pub mod sheet;
 pub mod warp;
 
 use glam::{DVec3, IVec3, Vec3};

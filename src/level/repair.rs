@@ -1,10 +1,10 @@
 //! What each level of a variant gets once it is made (by a network or the
 //! detail transfer) and before the next level is made from it: specks
 //! removed (`sample.remove_specks`) and, on a sheet, holes and cracks mended
-//! (`sample.mend_sheets`, [`super::height_field::mend_sheet`]). Decided once
+//! (`sample.mend_sheets`, [`super::sheet::mend_sheet`]). Decided once
 //! per exemplar level ([`repairs`]), so sampling and the transfer do the same.
 
-use super::structure::component_labels;
+use crate::grid::components::component_labels;
 use super::Level;
 
 /// A speck is a piece smaller than this share of the level's surface voxels
@@ -13,7 +13,7 @@ use super::Level;
 /// 138 voxels each (0.1% of the level; 0.14-0.64% of its voxels in all),
 /// where the exemplar is one piece; the networks' levels have none but
 /// single voxels. 0.5% keeps every piece the structure flags count
-/// ([`super::structure::PIECE_SHARE`], 5%) and every part the networks make.
+/// (`judge::THRESHOLDS.piece_share`, 5%) and every part the networks make.
 pub const SPECK_SHARE: f64 = 0.005;
 
 /// What one level of a variant gets once made.
@@ -46,7 +46,7 @@ impl Repaired {
 /// Per exemplar level, what a variant's level of the same index gets:
 /// specks below the exemplar's smallest piece removed where `remove_specks`,
 /// holes and cracks mended along its `sheet_axes`
-/// ([`super::height_field::sheet_axes`]) where `mend_sheets`. Empty when
+/// (`judge::sheet::sheet_axes`) where `mend_sheets`. Empty when
 /// both are off.
 pub fn repairs(exemplar_levels: &[Level], sheet_axes: &[Option<usize>], remove_specks: bool, mend_sheets: bool) -> Vec<LevelRepair> {
     if !remove_specks && !mend_sheets {
@@ -101,7 +101,7 @@ impl LevelRepair {
         }
         let mut added = 0;
         if let Some(axis) = self.sheet_axis {
-            let (mended, a) = super::height_field::mend_sheet(out.as_ref().unwrap_or(level), axis);
+            let (mended, a) = super::sheet::mend_sheet(out.as_ref().unwrap_or(level), axis);
             if a > 0 {
                 added = a;
                 out = Some(mended);

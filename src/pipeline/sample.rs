@@ -302,7 +302,7 @@ pub fn sample_variants_observed(
     };
     if last > diffusion_last {
         let config = &models.config.transfer;
-        let sheet_axes = crate::level::height_field::sheet_axes(exemplar_levels);
+        let sheet_axes = crate::judge::sheet::sheet_axes(exemplar_levels);
         let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
         for (i, v) in variants.iter_mut().enumerate() {
             let coarse = v.levels.last().or(from.as_ref()).ok_or_else(|| Error::Invalid("nothing to transfer from".into()))?;

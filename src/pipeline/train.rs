@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use super::children::train_in_processes;
+use super::children::{train_in_processes, training_cost};
 use super::sample::trained_levels;
 use super::stamp::{digest, is_done, mark_done, record_config, StampOf};
 use super::RunPaths;
@@ -17,19 +17,6 @@ use crate::level::Level;
 /// What level `k`'s trained models depend on.
 fn train_digest(source_sha: &str, config: &Config, k: usize) -> String {
     digest(&[source_sha, &config.stage_digest(Stage::Train), &k.to_string()])
-}
-
-/// A level's training time in units of one upper-level diffusion step, for
-/// ordering the jobs: a level-0 step (the 16^3 box) costs about 0.45 of one
-/// (the tower on the `cpu` profile: 41 ms against 85-110 ms per step with
-/// the upsampler's share), an upsampler step about 0.25.
-pub fn training_cost(config: &Config, level: usize) -> f64 {
-    let tc = &config.train;
-    if level == 0 {
-        0.45 * tc.level0_iterations as f64
-    } else {
-        tc.upper_iterations as f64 + 0.25 * tc.upsampler_iterations as f64
-    }
 }
 
 /// The levels whose training is not finished (no stamp for this exemplar and

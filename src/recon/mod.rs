@@ -101,6 +101,8 @@ pub enum ReconError {
     Failed(String),
 }
 
+crate::stage_error!(ReconError);
+
 /// Options of [`poisson`].
 #[derive(Clone, Debug)]
 pub struct PoissonOptions {

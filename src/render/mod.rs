@@ -129,6 +129,8 @@ pub enum RenderError {
     Encode { path: PathBuf, source: image::ImageError },
 }
 
+crate::stage_error!(RenderError);
+
 pub type Result<T> = std::result::Result<T, RenderError>;
 
 

@@ -68,7 +68,7 @@ pub struct Studio {
     pub exemplar: Vec<Level>,
     pub exemplar_name: String,
     /// The exemplar's structure level and its structure, for the verdicts.
-    pub exemplar_structure: Option<(usize, crate::level::structure::Structure)>,
+    pub exemplar_structure: Option<(usize, crate::judge::Structure)>,
     pub device: tch::Device,
     /// Whether the networks multiply in bf16 (see [`Precision`]).
     pub bf16: bool,

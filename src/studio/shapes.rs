@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::io::dataset::{self, StartRecord};
-use crate::level::structure::{structure_level, Against, Flag, Structure, StructureParams, StructureScores};
+use crate::judge::{self, structure_level, Against, Flag, Structure, Thresholds};
 use crate::level::Level;
 use crate::pipeline::layout::{variant_name, VARIANT_PREFIX};
 
@@ -42,7 +42,7 @@ pub struct Verdict {
 
 impl Verdict {
     /// The verdict of `scores` (the structure judge's figures).
-    pub fn of(scores: &StructureScores, by: &str) -> Verdict {
+    pub fn of(scores: &judge::Verdict, by: &str) -> Verdict {
         Verdict {
             flags: scores.flags.iter().map(|f| f.name().to_string()).collect(),
             whole: scores.whole(),
@@ -360,13 +360,13 @@ pub fn judge(exemplar: &[Level], reference: Option<&(usize, Structure)>, levels:
         (None, _) => Against::Exemplar { level0: levels.iter().find(|l| l.index == 0).map(|l| (&**l, &exemplar[0])) },
     };
     // Its fine level against the exemplar's, bent likewise (eval's).
-    let ex_fine = crate::level::structure::fine_level(exemplar);
+    let ex_fine = crate::judge::fine_level(exemplar);
     let fine_reference = ex_fine.map(|f| match start.bend {
         Some(b) => std::borrow::Cow::Owned(b.bent(exemplar, f.index)),
         None => std::borrow::Cow::Borrowed(f),
     });
     let fine = fine_reference.as_deref().and_then(|r| Some((&**levels.iter().find(|l| l.index == r.index)?, r)));
-    let scores = StructureScores::judged(shape, (ex, ex_structure), against, fine, &StructureParams::default());
+    let scores = judge::Verdict::judged(shape, (ex, ex_structure), against, fine, &Thresholds::default());
     Some(Verdict::of(&scores, "structure level"))
 }
 

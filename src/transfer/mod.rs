@@ -113,6 +113,8 @@ pub enum TransferError {
     Invalid(String),
 }
 
+crate::stage_error!(TransferError);
+
 /// A transferred level and, per voxel, the exemplar voxel (coordinates at the
 /// same level) it was copied from.
 #[derive(Clone, Debug)]

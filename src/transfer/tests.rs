@@ -166,7 +166,8 @@ fn the_thread_count_does_not_change_the_result() {
 /// the levels are mended as they are made.
 #[test]
 fn holes_through_a_sheet_are_closed_level_by_level_where_asked() {
-    use crate::level::height_field::{enclosed_columns, sheet_axis};
+    use crate::judge::sheet::sheet_axis;
+    use crate::level::sheet::enclosed_columns;
     let cap = |l: &mut Level| {
         let ys: Vec<f64> = (0..l.len()).map(|i| l.point_normalised(i).y).collect();
         l.retain(|i| ys[i] > 0.25);
@@ -195,7 +196,7 @@ fn holes_through_a_sheet_are_closed_level_by_level_where_asked() {
 #[test]
 fn specks_are_removed_level_by_level_where_asked() {
     use crate::level::repair::repairs;
-    use crate::level::structure::components;
+    use crate::grid::components::components;
     let levels = sphere_levels(&[16, 32, 64], DVec3::ZERO, 0.5);
     let mut coarse = levels[0].clone();
     let far = coarse.coords.iter().copied().max_by_key(|c| c.x).unwrap() + IVec3::new(2, 0, 0);

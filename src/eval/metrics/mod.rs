@@ -45,7 +45,7 @@
 //!    ([`voxelise_points`], [`voxelise_normalised_points`]).
 //! 3. **IoU and diversity** (`occupancy.rs`): [`iou`] of two occupancies;
 //!    [`diversity`], the mean `1 - IoU` over all pairs of variants.
-//! 4. **Local patches** (`crate::grid::patches`, shared with the structure
+//! 4. **Local patches** (`crate::judge::patches`, shared with the structure
 //!    flags): every sampled 11^3 patch of a
 //!    shape against every patch of the exemplar's dictionary
 //!    ([`ExemplarPatches`]); the best IoU and the best boundary F-score (1-voxel
@@ -77,7 +77,7 @@ mod voxelise;
 
 pub use colour::{ColourParams, ColourPatches, ColourScores};
 pub use detail::{DetailScores, Variation};
-pub use crate::grid::patches::{
+pub use crate::judge::patches::{
     best_patch_matches, local_patch_scores, lp_scores, ExemplarPatches, LpParams, LpScores, PatchMatches, PATCH,
     PATCH_WORDS,
 };

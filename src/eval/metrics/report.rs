@@ -7,10 +7,10 @@ use glam::Vec3;
 
 use super::colour::{self, ColourParams, ColourPatches, ColourScores};
 use super::detail::{DetailScores, Variation};
-use crate::grid::patches::{best_patch_matches, ExemplarPatches, LpParams, LpScores, PatchMatches};
+use crate::judge::patches::{best_patch_matches, ExemplarPatches, LpParams, LpScores, PatchMatches};
 use super::occupancy::{diversity, same_lattice, Occupancy};
 use super::point_distances::chamfer;
-use crate::level::structure::{Against, Flag, Structure, StructureParams, StructureScores};
+use crate::judge::{Against, Flag, Structure, Thresholds, Verdict};
 use crate::level::Level;
 
 /// Scores of one variant (or one rung of the degradation ladder) against the
@@ -44,15 +44,15 @@ pub struct VariantScores {
     /// The shape as a whole at the structure level (64^3) against the
     /// exemplar's, with its flags; None when not measured.
     #[serde(default)]
-    pub structure: Option<StructureScores>,
+    pub structure: Option<Verdict>,
     /// Whether the variant is the exemplar bent, so the views of its inside
     /// and its out-of-style patches are judged against the exemplar bent the
-    /// same way ([`StructureScores::against_bend`]). Not written when false.
+    /// same way ([`Verdict::against_bend`]). Not written when false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub bent: bool,
     /// The extent of its level-0 box against the exemplar's, where it is not
     /// the exemplar's: its structure is judged against the exemplar at that
-    /// extent ([`StructureScores::at_extent`]). Not written when none.
+    /// extent ([`Verdict::at_extent`]). Not written when none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub extent: Option<[f32; 3]>,
     /// Chamfer distance of the level-0 point set to the exemplar's, normalised
@@ -65,7 +65,7 @@ pub struct VariantScores {
 pub struct EvalParams {
     pub lp: LpParams,
     pub colour: ColourParams,
-    pub structure: StructureParams,
+    pub structure: Thresholds,
 }
 
 /// Below this RMS colour spread (RGB units) an exemplar has one colour, and
@@ -78,7 +78,7 @@ pub struct StructureSummary {
     /// Resolution of the level the structure was measured at.
     pub resolution: u32,
     /// Variants with no flag that says broken (every flag but near-copy:
-    /// fragment, shrunken, pieces, torn, open; [`crate::level::structure::Flag::broken`]).
+    /// fragment, shrunken, pieces, torn, open; [`crate::judge::Flag::broken`]).
     pub whole: usize,
     pub scored: usize,
     /// Variants flagged as near copies of the exemplar.
@@ -128,17 +128,17 @@ pub struct ShapeInput<'a> {
     /// For a variant that is the exemplar bent: the exemplar's structure
     /// level bent the same way, which the views of its inside and its
     /// out-of-style patches are judged against
-    /// ([`StructureScores::against_bend`]).
+    /// ([`Verdict::against_bend`]).
     pub bent_reference: Option<&'a Level>,
     /// For a variant sampled in a resized box: its extent and the exemplar's
     /// structure level at that extent ([`crate::level::resize::stretched`]).
     pub at_extent: Option<([f32; 3], &'a Level)>,
     /// Its level 0 and the exemplar's, where it was sampled in the
-    /// exemplar's box and not bent ([`StructureScores::with_coarse`]).
+    /// exemplar's box and not bent ([`Verdict::with_coarse`]).
     pub level0: Option<(&'a Level, &'a Level)>,
     /// The level after the structure level (128^3) and the exemplar's same
     /// level to compare it with (bent where the variant was), if both exist
-    /// ([`StructureScores::with_fine`]).
+    /// ([`Verdict::with_fine`]).
     pub fine_level: Option<(&'a Level, &'a Level)>,
 }
 
@@ -152,6 +152,8 @@ pub enum DegenerateShape {
     #[error("{0}: the finest level has no active voxels")]
     EmptyLevel(String),
 }
+
+crate::stage_error!(DegenerateShape);
 
 /// Above this fraction of the lattice, an occupancy is "everything".
 pub const FILLED_FRACTION: f64 = 0.9;
@@ -230,7 +232,7 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
                         (None, Some((a, s))) => Against::AtExtent(a, s),
                         (None, None) => Against::Exemplar { level0: v.level0 },
                     };
-                    Some(StructureScores::judged(vl, (el, es), against, v.fine_level, &params.structure))
+                    Some(Verdict::judged(vl, (el, es), against, v.fine_level, &params.structure))
                 }
                 _ => None,
             },
@@ -254,7 +256,7 @@ pub fn evaluate(exemplar: &ShapeInput, variants: &[ShapeInput], params: &EvalPar
 impl StructureSummary {
     /// The flags of the variants that have structure scores; None if none has.
     pub fn of(variants: &[VariantScores]) -> Option<Self> {
-        let scored: Vec<(&str, &StructureScores)> =
+        let scored: Vec<(&str, &Verdict)> =
             variants.iter().filter_map(|v| v.structure.as_ref().map(|s| (v.name.as_str(), s))).collect();
         let first = scored.first()?;
         Some(StructureSummary {

@@ -72,6 +72,8 @@ pub enum GridError {
     Invalid(String),
 }
 
+crate::stage_error!(GridError);
+
 type GridResult<T> = std::result::Result<T, GridError>;
 
 mod kernel_map;

@@ -68,6 +68,8 @@ pub enum SparseError {
     Device(String),
 }
 
+crate::stage_error!(SparseError);
+
 pub type Result<T, E = SparseError> = std::result::Result<T, E>;
 
 pub(super) fn invalid<T>(msg: impl Into<String>) -> Result<T> {

@@ -293,7 +293,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     let mut make_batch = data.diffusion_batches(tc)?;
     let diffusion_phase = if level == 0 { "level 0 diffusion" } else { "diffusion" };
     // The level's progress: the upsampler's steps cost about a quarter of a
-    // diffusion step's (whole grid, no noise levels; pipeline::training_cost).
+    // diffusion step's (whole grid, no noise levels; pipeline::children::training_cost).
     let upsampler_cost = if data.coarse.is_some() { 0.25 * tc.upsampler_iterations as f64 } else { 0.0 };
     let split = upsampler_cost / (upsampler_cost + diff_total as f64).max(1.0);
     if let Some(coarse) = &data.coarse {

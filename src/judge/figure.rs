@@ -26,27 +26,16 @@
 
 use glam::{DVec3, IVec3};
 
-use super::Level;
+use super::thresholds::THRESHOLDS;
 use crate::grid::VoxelMap;
+use crate::level::Level;
 
 /// Equal cells of directions on the sphere (Fibonacci lattice), about 14
 /// degrees across.
 pub const DIRECTION_CELLS: usize = 200;
 
-/// A figure's normals spread over at least this share of what a sphere's
-/// take (the ruined tower 0.36, the demo tower 0.65; the bunny 0.77 and the
-/// least spread figure measured 0.66).
-pub const MIN_NORMAL_SPREAD: f64 = 0.65;
 
-/// A figure's upright share along every axis is at most this (a sphere's is
-/// 0.26; the figures measured at most 0.39, the man-made objects with a
-/// spread above [`MIN_NORMAL_SPREAD`] 0.55 or more).
-pub const MAX_UPRIGHT_SHARE: f64 = 0.4;
 
-/// The coarsest level read: below it a stone or a facet is a voxel or two
-/// and reads as a direction of its own (the small test tower at 32^3, from a
-/// 64^3 sampling: spread 0.81, upright share 0.31, a figure).
-pub const MIN_READING_RESOLUTION: u32 = 48;
 
 /// sin(15 degrees): a normal this close to square to an axis faces as a wall
 /// standing along that axis does.
@@ -66,10 +55,10 @@ pub struct FigureReading {
 
 impl FigureReading {
     /// The reading of an exemplar: of its structure level (the finest of at
-    /// most 64^3), where that is [`MIN_READING_RESOLUTION`]^3 or finer; None
+    /// most 64^3), where that is `THRESHOLDS.min_reading_resolution`^3 or finer; None
     /// where it has no such level or no surface there.
     pub fn of_exemplar(levels: &[Level]) -> Option<FigureReading> {
-        super::structure::structure_level(levels).filter(|l| l.resolution >= MIN_READING_RESOLUTION).and_then(FigureReading::of)
+        super::levels::structure_level(levels).filter(|l| l.resolution >= THRESHOLDS.min_reading_resolution).and_then(FigureReading::of)
     }
 
     /// The reading of `level`'s surface voxels (mask > 0); None where it has
@@ -119,7 +108,7 @@ impl FigureReading {
 
     /// Faces every way: no flat faces, no walls along an axis.
     pub fn is_figure(&self) -> bool {
-        self.normal_spread >= MIN_NORMAL_SPREAD && self.upright_share <= MAX_UPRIGHT_SHARE
+        self.normal_spread >= THRESHOLDS.min_normal_spread && self.upright_share <= THRESHOLDS.max_upright_share
     }
 }
 

@@ -16,41 +16,24 @@
 //! is judged.
 //!
 //! Lengths are in voxels of the level measured and scale with its resolution
-//! against [`super::structure::STRUCTURE_RESOLUTION`].
+//! against [`super::levels::STRUCTURE_RESOLUTION`].
 
-use super::structure::STRUCTURE_RESOLUTION;
-use super::Level;
+use super::levels::STRUCTURE_RESOLUTION;
+use super::thresholds::THRESHOLDS;
+use crate::level::Level;
 
-/// A height difference between neighbouring columns of at least this many
-/// voxels at 64^3 is a step. Along an axis where the exemplar's top is
-/// smooth its heights do not change at all (a ridge's length), so one voxel
-/// is already a seam; along a slope every column steps, and that axis is not
-/// judged ([`SMOOTH_SHARE`]).
-pub const STEP_VOXELS: f32 = 1.0;
 
-/// Along an axis where at most this share of the exemplar's neighbouring
-/// inner columns step, the exemplar is smooth and a shape's steps are
-/// judged: a gable house's ridge direction has 0-0.5% (a chimney, a dormer),
-/// across its roof 40% and more; a ruined tower's crown 5% and more.
-pub const SMOOTH_SHARE: f64 = 0.01;
 
-/// A seam: along an axis, a place where at least this share of the inner
-/// columns across it step (within [`SEAM_WINDOW`] columns, so a jagged
-/// seam counts once): a roof in two halves. A dormer or a chimney steps
-/// across a fifth of a roof's width or less, a seam across all of it.
-pub const SEAM_SHARE: f64 = 0.5;
 
-/// Columns along the axis over which one seam's steps are gathered.
-pub const SEAM_WINDOW: i32 = 3;
 
 /// The top surface's steps along the two horizontal axes (across the
 /// level's up axis, in x, y, z order).
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TopSteps {
     /// Per axis, the share of neighbouring inner columns whose heights
-    /// differ by a step ([`STEP_VOXELS`], scaled to the level's resolution).
+    /// differ by a step (`THRESHOLDS.step_voxels`, scaled to the level's resolution).
     pub shares: [f64; 2],
-    /// Per axis, the seams ([`SEAM_SHARE`]) across it.
+    /// Per axis, the seams (`THRESHOLDS.seam_share`) across it.
     pub seams: [usize; 2],
 }
 
@@ -67,7 +50,7 @@ pub fn top_steps(level: &Level) -> TopSteps {
             *e = (*e).max(c[up]);
         }
     }
-    let step = (STEP_VOXELS * level.resolution as f32 / STRUCTURE_RESOLUTION as f32).max(1.0).round() as i32;
+    let step = (THRESHOLDS.step_voxels * level.resolution as f32 / STRUCTURE_RESOLUTION as f32).max(1.0).round() as i32;
     let inner = |k: (i32, i32)| [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().all(|d| top.contains_key(&(k.0 + d.0, k.1 + d.1)));
     let mut out = TopSteps::default();
     for axis in 0..2 {
@@ -94,10 +77,10 @@ pub fn top_steps(level: &Level) -> TopSteps {
         let mut last_seam: Option<i32> = None;
         for (&at, &n) in &pairs {
             let across: std::collections::HashSet<i32> =
-                stepped.iter().filter(|(a, _)| (at..at + SEAM_WINDOW).contains(a)).map(|&(_, o)| o).collect();
-            if across.len() as f64 >= SEAM_SHARE * n as f64 {
+                stepped.iter().filter(|(a, _)| (at..at + THRESHOLDS.seam_window).contains(a)).map(|&(_, o)| o).collect();
+            if across.len() as f64 >= THRESHOLDS.seam_share * n as f64 {
                 // Steps within the window of the last seam are that seam.
-                if last_seam.is_none_or(|l| at >= l + SEAM_WINDOW) {
+                if last_seam.is_none_or(|l| at >= l + THRESHOLDS.seam_window) {
                     out.seams[axis] += 1;
                 }
                 last_seam = Some(at);
@@ -108,19 +91,19 @@ pub fn top_steps(level: &Level) -> TopSteps {
 }
 
 /// The seams a shape's top has beyond the exemplar's, along the horizontal
-/// axis where the exemplar's top is smooth ([`SMOOTH_SHARE`]) and the shape
+/// axis where the exemplar's top is smooth (`THRESHOLDS.smooth_share`) and the shape
 /// has most more (0 where the exemplar is smooth along no axis).
 pub fn extra_seams(shape: &TopSteps, exemplar: &TopSteps) -> usize {
-    (0..2).filter(|&a| exemplar.shares[a] <= SMOOTH_SHARE).map(|a| shape.seams[a].saturating_sub(exemplar.seams[a])).max().unwrap_or(0)
+    (0..2).filter(|&a| exemplar.shares[a] <= THRESHOLDS.smooth_share).map(|a| shape.seams[a].saturating_sub(exemplar.seams[a])).max().unwrap_or(0)
 }
 
-/// Along an axis where the exemplar's top is smooth ([`SMOOTH_SHARE`]), the
+/// Along an axis where the exemplar's top is smooth (`THRESHOLDS.smooth_share`), the
 /// share of a shape's neighbouring inner columns that step beyond the
 /// exemplar's share (the largest over such axes; 0 where the exemplar is
 /// smooth along no axis): a roof creased or cracked across, whose steps
 /// wander along it (a diagonal crack) and so never gather into a seam.
 pub fn smooth_step_excess(shape: &TopSteps, exemplar: &TopSteps) -> f64 {
-    (0..2).filter(|&a| exemplar.shares[a] <= SMOOTH_SHARE).map(|a| (shape.shares[a] - exemplar.shares[a]).max(0.0)).fold(0.0, f64::max)
+    (0..2).filter(|&a| exemplar.shares[a] <= THRESHOLDS.smooth_share).map(|a| (shape.shares[a] - exemplar.shares[a]).max(0.0)).fold(0.0, f64::max)
 }
 
 /// The voxel columns of a prism roof for the tests: a gable house `length`
@@ -162,7 +145,7 @@ mod tests {
     #[test]
     fn a_roof_in_two_halves_has_a_seam_along_its_ridge_and_a_whole_one_has_none() {
         let whole = top_steps(&gable(40, 20, 16, 100, 0));
-        assert!(whole.shares[0] <= SMOOTH_SHARE, "along the ridge a whole roof is smooth: {whole:?}");
+        assert!(whole.shares[0] <= THRESHOLDS.smooth_share, "along the ridge a whole roof is smooth: {whole:?}");
         assert!(whole.shares[1] > 0.3, "across it, a steep roof steps at every column: {whole:?}");
         assert_eq!(whole.seams[0], 0);
         for seam in [1, 2] {

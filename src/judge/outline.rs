@@ -7,25 +7,22 @@
 //! tower broken lower on one side shows a new outline from that side.
 //!
 //! Lengths are in voxels of the level measured, scaled with its resolution
-//! against [`super::structure::STRUCTURE_RESOLUTION`]: one pixel is one
+//! against [`super::levels::STRUCTURE_RESOLUTION`]: one pixel is one
 //! voxel of the 64^3 level.
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::structure::STRUCTURE_RESOLUTION;
-use super::Level;
+use super::levels::STRUCTURE_RESOLUTION;
+use super::thresholds::THRESHOLDS;
+use crate::level::Level;
 
 /// A surface point covers the pixels within this radius of it (pixels).
 const SPLAT_RADIUS: f32 = 1.0;
 
-/// A pixel of one outline counts as different only with no pixel of the
-/// other's within this many pixels (Chebyshev): an outline one voxel wider
-/// is the same outline.
-const TOLERANCE: i64 = 1;
 
 /// The worst view's share of the pixels either outline covers where the two
-/// differ ([`TOLERANCE`]): 0 for the same outline from every view, 1 for
+/// differ (`THRESHOLDS.outline_tolerance`): 0 for the same outline from every view, 1 for
 /// outlines that nowhere meet. `shape` and `exemplar` are levels of the same
 /// resolution and frame; 1 when either has no surface.
 pub fn outline_difference(shape: &Level, exemplar: &Level) -> f64 {
@@ -92,12 +89,12 @@ impl View {
     }
 
     /// Share of the pixels either outline covers that one covers with none
-    /// of the other's within [`TOLERANCE`].
+    /// of the other's within `THRESHOLDS.outline_tolerance`.
     fn difference(&self, a: &[bool], b: &[bool]) -> f64 {
         let n = self.size() as i64;
         let near = |o: &[bool], x: i64, y: i64| {
-            (-TOLERANCE..=TOLERANCE).any(|dy| {
-                (-TOLERANCE..=TOLERANCE).any(|dx| {
+            (-THRESHOLDS.outline_tolerance..=THRESHOLDS.outline_tolerance).any(|dy| {
+                (-THRESHOLDS.outline_tolerance..=THRESHOLDS.outline_tolerance).any(|dx| {
                     let (u, v) = (x + dx, y + dy);
                     u >= 0 && v >= 0 && u < n && v < n && o[(v * n + u) as usize]
                 })

@@ -9,7 +9,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::occupancy::{same_lattice, Occupancy};
+use crate::grid::occupancy::{same_lattice, Occupancy};
 use crate::util::rng::Rng;
 
 /// Patch edge, voxels (DECOR-GAN / SSG: 11).

@@ -25,22 +25,20 @@
 //! not a tear.
 //!
 //! Lengths are in voxels of the level measured and scale with its resolution
-//! against [`super::structure::STRUCTURE_RESOLUTION`].
+//! against [`super::levels::STRUCTURE_RESOLUTION`].
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::structure::STRUCTURE_RESOLUTION;
-use super::Level;
+use super::levels::STRUCTURE_RESOLUTION;
+use super::thresholds::THRESHOLDS;
+use crate::level::Level;
 
 /// Elevations of the view bands, degrees above the horizontal. No top view:
 /// see [`seen_through_excess`].
 pub const ELEVATIONS_DEG: [f32; 3] = [-20.0, 15.0, 50.0];
 /// Views per band, evenly spread in azimuth about the exemplar's up axis.
 pub const AZIMUTHS: usize = 8;
-/// Views per band whose shares [`seen_through_excess`] compares: a slit or a
-/// torn roof shows in about this many of a band's views.
-pub const WORST_VIEWS: usize = 3;
 /// Views in all, band after band.
 pub const VIEWS: usize = ELEVATIONS_DEG.len() * AZIMUTHS;
 
@@ -49,16 +47,6 @@ const PIXEL: f32 = 0.5;
 /// Radius of a surface point's splat, voxels: covers the gaps between the
 /// points of neighbouring voxels seen at any angle (a cube's projection).
 const SPLAT_RADIUS: f32 = 1.0;
-/// Narrowest gap, voxels at 64^3, that is not a crack: wider openings close
-/// no more than the exemplar's doorways do.
-const CRACK_WIDTH: f32 = 5.5;
-/// How far behind its closed surroundings a crack's surface lies, voxels at 64^3
-/// (more than a wall's relief of stones).
-const CRACK_DEPTH: f32 = 3.0;
-/// A surface faces away from the eye below this cosine.
-const BACK_FACING_COS: f32 = -0.5;
-/// Marked regions smaller than this are dropped, square voxels at 64^3.
-const MIN_REGION: f32 = 12.0;
 
 /// Per view ([`VIEWS`], band after band), the share of the silhouette's pixels
 /// where the inside is seen. Empty for a level coarser than 32^3 (too few
@@ -115,7 +103,7 @@ fn render(points: &[Vec3], centre: Vec3, reach: f32, up: Vec3, toward: Vec3) -> 
     let screen_up = toward.cross(right);
     // A margin wider than the crack window: the closing must meet empty
     // pixels beyond the silhouette, or its rim would read as a crack.
-    let half = ((reach + SPLAT_RADIUS + 2.0 * CRACK_WIDTH) / PIXEL).ceil() as i64 + 1;
+    let half = ((reach + SPLAT_RADIUS + 2.0 * THRESHOLDS.crack_width) / PIXEL).ceil() as i64 + 1;
     let size = (2 * half + 1) as usize;
     let mut near = vec![f32::NEG_INFINITY; size * size];
     let mut point = vec![u32::MAX; size * size];
@@ -144,21 +132,21 @@ fn render(points: &[Vec3], centre: Vec3, reach: f32, up: Vec3, toward: Vec3) -> 
 
 impl Image {
     /// Share of the silhouette's pixels in marked regions (back faces or
-    /// cracks, [`MIN_REGION`] or larger); `scale`: the level's resolution / 64.
+    /// cracks, `THRESHOLDS.min_region` or larger); `scale`: the level's resolution / 64.
     fn seen_share(&self, scale: f32, toward: Vec3, normals: &[Vec3]) -> f64 {
         let n = self.size;
-        let half_window = ((CRACK_WIDTH * scale / PIXEL) / 2.0).round() as usize;
+        let half_window = ((THRESHOLDS.crack_width * scale / PIXEL) / 2.0).round() as usize;
         let closed = min_filter(&max_filter(&self.near, n, half_window), n, half_window);
-        let depth = CRACK_DEPTH * scale;
+        let depth = THRESHOLDS.crack_depth * scale;
         let marked: Vec<bool> = (0..n * n)
             .map(|k| {
                 let hit = self.near[k].is_finite();
-                let back = hit && normals[self.point[k] as usize].dot(toward) < BACK_FACING_COS;
+                let back = hit && normals[self.point[k] as usize].dot(toward) < THRESHOLDS.back_facing_cos;
                 let crack = closed[k].is_finite() && (!hit || closed[k] - self.near[k] > depth);
                 back || crack
             })
             .collect();
-        let min_pixels = (MIN_REGION * scale * scale / (PIXEL * PIXEL)).round() as usize;
+        let min_pixels = (THRESHOLDS.min_region * scale * scale / (PIXEL * PIXEL)).round() as usize;
         let kept = large_regions(&marked, n, min_pixels);
         // The splats reach a splat radius into a gap from either side: the
         // marked regions, grown back by that radius, are the gap as wide as
@@ -249,7 +237,7 @@ fn large_regions(marked: &[bool], n: usize, min_pixels: usize) -> Vec<bool> {
 
 /// How much more of the inside a shape shows than the exemplar: per view band
 /// (the elevations of [`ELEVATIONS_DEG`]), the mean share of the band's
-/// [`WORST_VIEWS`] views showing the most, the shape's less the exemplar's;
+/// `THRESHOLDS.worst_views` views showing the most, the shape's less the exemplar's;
 /// the largest over the bands (a share of the silhouette; 0 when it shows no
 /// more anywhere, or when either was not measured).
 ///
@@ -268,7 +256,7 @@ pub fn seen_through_excess(shape: &[f64], exemplar: &[f64]) -> f64 {
     let worst = |v: &[f64], band: usize| {
         let mut s = v[band * AZIMUTHS..(band + 1) * AZIMUTHS].to_vec();
         s.sort_by(|a, b| b.total_cmp(a));
-        s[..WORST_VIEWS].iter().sum::<f64>() / WORST_VIEWS as f64
+        s[..THRESHOLDS.worst_views].iter().sum::<f64>() / THRESHOLDS.worst_views as f64
     };
     (0..ELEVATIONS_DEG.len())
         .map(|b| worst(shape, b) - worst(exemplar, b))
@@ -348,7 +336,7 @@ mod tests {
         // above it shows the inner faces of its walls over its rim: an open
         // top, the exemplar's own).
         assert!(w[0..8].iter().all(|&v| v < 0.01), "{w:?}");
-        let flagged = crate::level::structure::StructureParams::default().max_seen_through_excess;
+        let flagged = crate::judge::Thresholds::default().max_seen_through_excess;
         let excess = seen_through_excess(&s, &w);
         assert!(excess > flagged, "slit excess {excess}: {s:?}");
         assert_eq!(seen_through_excess(&w, &w), 0.0);
@@ -382,7 +370,7 @@ mod tests {
         };
         let (whole, holed) = (seen_through(&sphere(false)), seen_through(&sphere(true)));
         assert!(whole.iter().all(|&v| v < 0.01), "{whole:?}");
-        let flagged = crate::level::structure::StructureParams::default().max_seen_through_excess;
+        let flagged = crate::judge::Thresholds::default().max_seen_through_excess;
         assert!(seen_through_excess(&holed, &whole) > flagged, "{holed:?}");
     }
 }
