@@ -38,7 +38,7 @@ if [ -z "$RUN" ]; then
     --set encode.sampling_resolution=128 --set encode.finest_resolution=64 \
     --set model.channels=8 --set model.upsampler_channels=8 \
     --set train.level0_iterations=150 --set train.upper_iterations=60 --set train.upsampler_iterations=60 \
-    --set sample.level0_candidates=1 --set sample.attempts=1 --set sample.level0_steps=20 --set sample.upper_steps=4 > /dev/null
+    --set 'sample.level0={candidates = 1}' --set 'sample.attempts={count = 1}' --set 'sample.proposers={}' --set sample.level0_steps=20 --set sample.upper_steps=4 > /dev/null
 fi
 
 "$BIN" studio "$RUN" --port 0 > "$WORK/studio.out" 2> "$WORK/studio.err" &

@@ -294,167 +294,8 @@ pub enum Mixing {
     Code,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SampleConfig {
-    pub sampler: crate::learn::schedule::Sampler,
-    pub level0_steps: usize,
-    pub upper_steps: usize,
-    /// The last reverse step's rule (not written at its default, so the
-    /// digests of configurations without it stay valid).
-    #[serde(default, skip_serializing_if = "crate::learn::schedule::FinalStep::is_default")]
-    pub final_step: crate::learn::schedule::FinalStep,
-    /// Level-0 shapes sampled per variant, at most (1: no rejection): each
-    /// is kept only when its structure against the exemplar's level 0
-    /// scores at least `level0_min_structure`; which of those is the
-    /// variant's is `level0_pick`; when none does, the best. 16^3 costs
-    /// little, and a broken coarse shape is what no finer level mends.
-    #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
-    pub level0_candidates: usize,
-    #[serde(default, skip_serializing_if = "is_zero_f64")]
-    pub level0_min_structure: f64,
-    /// Which of the level-0 candidates that reach `level0_min_structure`
-    /// the variant keeps: the first, or the first new enough against the
-    /// exemplar's level 0, else the least like it of all. A level-0 network that learned
-    /// its one exemplar draws it again most of the time; the finer levels
-    /// then copy it too.
-    #[serde(default, skip_serializing_if = "Level0Pick::is_default")]
-    pub level0_pick: Level0Pick,
-    /// The reverse process at level 0, when it differs from `sampler`
-    /// (DDPM's fresh noise at every step strays from the learned shape
-    /// where deterministic DDIM returns to it).
-    #[serde(default, skip_serializing_if = "Level0Sampler::is_default")]
-    pub level0_sampler: Level0Sampler,
-    /// Coarse-to-fine passes per variant at most (1: one pass): until one
-    /// is whole (no fragment, shrunken, pieces, torn, open or seen_through flag) at the
-    /// structure level (64^3); else the best is kept.
-    #[serde(default = "one_usize", skip_serializing_if = "is_one_usize")]
-    pub attempts: usize,
-    /// With `attempts` > 1, a pass whose structure level is a near copy of
-    /// the exemplar's (the `near_copy` flag) is not kept while attempts are
-    /// left: the first whole pass that is not a copy is; when none is, a
-    /// whole copy before anything broken. Not written when off, so the
-    /// digests of configurations without it stay valid.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub reject_copies: bool,
-    /// Where the exemplar is a height field without a hole through it (a
-    /// terrain, a cliff), every level sampled or transferred has its holes
-    /// through the sheet and cracks at its steps closed before the next level is made
-    /// (`level::sheet::mend_sheet`); other exemplars are not touched.
-    /// Not written when off.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub mend_sheets: bool,
-    /// Every level sampled or transferred loses its specks, pieces smaller
-    /// than 0.5% of its voxels and than every piece of the exemplar's level
-    /// (`level::repair`), before the next level is made: the detail
-    /// transfer's loose flecks. Not written when off.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub remove_specks: bool,
-    /// With `level0_pick = novel`, `level0_candidates` > 1 and the
-    /// exemplar's box (no `--extent`): where none of a pass's level-0
-    /// candidates is new enough, the pass is instead the exemplar bent at
-    /// random (`level::warp`), each field of the bend moving its part by up
-    /// to this many level-0 voxels, at every level (the finer levels'
-    /// detail is transferred from the exemplar bent the same way); 0: never,
-    /// the candidate least like the exemplar is kept. For a figure with
-    /// nothing repeated in it (a bunny, a statue), whose level-0 network
-    /// offers only the figure again or the figure with a part lost: a bent
-    /// exemplar is a new pose of the whole figure. Not written when 0.
-    #[serde(default, skip_serializing_if = "is_zero_f64")]
-    pub bend_voxels: f64,
-    /// Which exemplars `bend_voxels` bends: `figures` (the profiles'), only
-    /// an exemplar whose surface faces every way, with no flat faces and no
-    /// walls standing along an axis (`judge::figure`: a bent wall leans and
-    /// a bent plate warps, neither a ruin's nor a part's style); `all`, any.
-    /// Not written when `figures`.
-    #[serde(default, skip_serializing_if = "BendExemplars::is_figures")]
-    pub bend_exemplars: BendExemplars,
-    /// With `level0_pick = novel`, `level0_candidates` > 1 and the
-    /// exemplar's box: where none of a pass's level-0 candidates is new
-    /// enough and the exemplar is not bent (a building, a part, a terrain),
-    /// the pass starts instead from a level-0 box resized along its longer
-    /// horizontal axis by a factor in [1.25, `resize_max`] (the paper's
-    /// resize, `level::resize`): the networks fill a longer box in their own
-    /// way (a house with more windows), where in the exemplar's box they
-    /// draw the exemplar again. The variant records its extent
-    /// (`extent.json`) and is judged against the exemplar at that extent.
-    /// 0: never. Not written when 0.
-    #[serde(default, skip_serializing_if = "is_zero_f64")]
-    pub resize_max: f64,
-}
+pub use crate::learn::sample::settings::{BendExemplars, Level0Pick, Level0Sampler, SampleConfig};
 
-/// Which exemplars sampling may bend (`sample.bend_exemplars`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum BendExemplars {
-    /// Those [`crate::judge::figure::FigureReading`] reads as figures.
-    #[default]
-    Figures,
-    /// Any exemplar.
-    All,
-}
-
-impl BendExemplars {
-    /// The default (serde's skip test).
-    pub fn is_figures(&self) -> bool {
-        *self == BendExemplars::Figures
-    }
-}
-
-/// Which level-0 candidate a variant keeps (`sample.level0_pick`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Level0Pick {
-    /// The first whose structure passes.
-    #[default]
-    First,
-    /// Of those whose structure passes, the first new enough against the
-    /// exemplar's level 0, else the least like it
-    /// ([`crate::learn::sample::NEW_ENOUGH_LEVEL0_FSCORE`]).
-    Novel,
-}
-
-impl Level0Pick {
-    fn is_default(&self) -> bool {
-        *self == Level0Pick::First
-    }
-}
-
-/// The reverse process at level 0 (`sample.level0_sampler`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Level0Sampler {
-    /// `sample.sampler`, as at every level.
-    #[default]
-    Same,
-    Ddpm,
-    Ddim,
-}
-
-impl Level0Sampler {
-    fn is_default(&self) -> bool {
-        *self == Level0Sampler::Same
-    }
-    /// The sampler level 0 uses, given the one of the other levels.
-    pub fn or(self, others: crate::learn::schedule::Sampler) -> crate::learn::schedule::Sampler {
-        use crate::learn::schedule::Sampler;
-        match self {
-            Level0Sampler::Same => others,
-            Level0Sampler::Ddpm => Sampler::Ddpm,
-            Level0Sampler::Ddim => Sampler::Ddim,
-        }
-    }
-}
-
-fn one_usize() -> usize {
-    1
-}
-fn is_one_usize(v: &usize) -> bool {
-    *v == 1
-}
-fn is_zero_f64(v: &f64) -> bool {
-    *v == 0.0
-}
 
 /// The stages whose results depend on sections of the configuration
 /// ([`Config::stage_digest`]); meshing and USD name their own few settings.
@@ -513,25 +354,29 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        let defaults: [(&str, &str, toml::Value); 13] = [
-            ("sample", "final_step", toml::Value::String("prediction".into())),
-            ("sample", "level0_pick", toml::Value::String("first".into())),
-            ("sample", "level0_sampler", toml::Value::String("same".into())),
-            ("sample", "level0_candidates", toml::Value::Integer(1)),
-            ("sample", "level0_min_structure", toml::Value::Float(0.0)),
-            ("sample", "attempts", toml::Value::Integer(1)),
-            ("sample", "reject_copies", toml::Value::Boolean(false)),
-            ("sample", "mend_sheets", toml::Value::Boolean(false)),
-            ("sample", "remove_specks", toml::Value::Boolean(false)),
-            ("sample", "bend_voxels", toml::Value::Float(0.0)),
-            ("sample", "bend_exemplars", toml::Value::String("figures".into())),
-            ("sample", "resize_max", toml::Value::Float(0.0)),
-            ("train", "bf16", toml::Value::Boolean(false)),
-        ];
-        for (section, key, value) in defaults {
-            if let Some(sec) = table.get_mut(section).and_then(|s| s.as_table_mut()) {
-                sec.entry(key).or_insert(value);
+        // The nested sampling tables, each with every key (so `--set` finds
+        // them), from a [sample] section in either layout.
+        if let Some(sample) = table.get_mut("sample").and_then(|s| s.as_table_mut()) {
+            let moved = crate::learn::sample::settings::migrate(sample);
+            if !moved.is_empty() {
+                log::warn!(
+                    "configuration: sample.{} written before [sample.level0], [sample.attempts], [sample.filters] and [sample.proposers]: read into those tables",
+                    moved.join(", sample.")
+                );
             }
+            sample.entry("final_step").or_insert(toml::Value::String("prediction".into()));
+            let defaults = toml::Value::try_from(crate::learn::sample::settings::NestedDefaults::default()).expect("serialises");
+            for (name, value) in defaults.as_table().expect("a table") {
+                let sub = sample.entry(name.as_str()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+                if let (Some(sub), Some(keys)) = (sub.as_table_mut(), value.as_table()) {
+                    for (k, v) in keys {
+                        sub.entry(k.as_str()).or_insert(v.clone());
+                    }
+                }
+            }
+        }
+        if let Some(train) = table.get_mut("train").and_then(|s| s.as_table_mut()) {
+            train.entry("bf16").or_insert(toml::Value::Boolean(false));
         }
         for o in overrides {
             apply_override(&mut table, o)?;
@@ -547,7 +392,12 @@ impl Config {
     /// Reads a configuration recorded in an output folder.
     pub fn read(path: &std::path::Path) -> Result<Config> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
-        let mut c: Config = toml::from_str(&text).map_err(|e| Error::file(path, crate::error::one_line(&e.to_string())))?;
+        let mut table: toml::Table = toml::from_str(&text).map_err(|e| Error::file(path, crate::error::one_line(&e.to_string())))?;
+        if let Some(sample) = table.get_mut("sample").and_then(|s| s.as_table_mut()) {
+            crate::learn::sample::settings::migrate(sample);
+        }
+        let mut c: Config =
+            toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| Error::file(path, crate::error::one_line(&e.to_string())))?;
         c.normalise();
         c.validate()?;
         Ok(c)
@@ -559,7 +409,24 @@ impl Config {
 
     /// Short digest of the whole configuration (hex, 16 chars).
     pub fn digest(&self) -> String {
-        digest_str(&self.to_toml())
+        digest_str(&self.digest_toml())
+    }
+
+    /// The text [`Config::digest`] hashes: the configuration with its
+    /// `[sample]` section in the layout before the nesting
+    /// ([`SampleConfig::stamp_toml`]), so digests recorded before stay valid.
+    fn digest_toml(&self) -> String {
+        let text = self.to_toml();
+        let Some(start) = text.find("[sample]\n") else { return text };
+        let body = start + "[sample]\n".len();
+        // The section ends at the next header that is not one of its tables.
+        let end = text[body..]
+            .match_indices("\n[")
+            .map(|(i, _)| body + i + 1)
+            .find(|&i| !text[i..].starts_with("[sample."))
+            .unwrap_or(text.len());
+        let tail = if end < text.len() { "\n" } else { "" };
+        format!("{}[sample]\n{}{tail}{}", &text[..start], self.sample.stamp_toml(), &text[end..])
     }
 
     /// Digest of the settings one stage depends on, so changing the sampler
@@ -579,7 +446,7 @@ impl Config {
                 section_toml(&self.encode),
                 section_toml(&self.model),
                 section_toml(&self.train),
-                section_toml(&self.sample),
+                self.sample.stamp_toml(),
                 section_toml(&self.output),
                 // Detail transfer, where on (absent before it existed).
                 if self.transfer.is_off() { String::new() } else { section_toml(&self.transfer) },
@@ -661,31 +528,7 @@ impl Config {
         if !(t.lr > 0.0 && t.upsampler_lr > 0.0) {
             return Err(Error::Invalid("learning rates must be positive".into()));
         }
-        if self.sample.level0_steps == 0 || self.sample.upper_steps == 0 {
-            return Err(Error::Invalid("sample steps must be at least 1".into()));
-        }
-        if self.sample.level0_candidates == 0 || self.sample.level0_candidates > 64 {
-            return Err(Error::Invalid("sample.level0_candidates must be in 1..=64".into()));
-        }
-        if self.sample.attempts == 0 || self.sample.attempts > 64 {
-            return Err(Error::Invalid("sample.attempts must be in 1..=64".into()));
-        }
-        if !(0.0..=crate::level::warp::MAX_BEND_VOXELS).contains(&self.sample.bend_voxels) {
-            return Err(Error::Invalid(format!(
-                "sample.bend_voxels must be in [0, {}] (level-0 voxels)",
-                crate::level::warp::MAX_BEND_VOXELS
-            )));
-        }
-        let r = self.sample.resize_max;
-        if !(r == 0.0 || (crate::level::resize::RESIZE_MIN_SCALE..=4.0).contains(&r)) {
-            return Err(Error::Invalid(format!(
-                "sample.resize_max must be 0 (never resize) or in [{}, 4]",
-                crate::level::resize::RESIZE_MIN_SCALE
-            )));
-        }
-        if !(0.0..=1.0).contains(&self.sample.level0_min_structure) {
-            return Err(Error::Invalid("sample.level0_min_structure must be in [0, 1]".into()));
-        }
+        self.sample.check().map_err(Error::Invalid)?;
         Ok(())
     }
 }
@@ -713,16 +556,26 @@ const OPTIONAL_KEYS: &[(&str, &str)] = &[
 fn apply_override(table: &mut toml::Table, spec: &str) -> Result<()> {
     let bad = || Error::Invalid(format!("--set '{spec}': expected section.key=value"));
     let (path, value) = spec.split_once('=').ok_or_else(bad)?;
-    let (section, key) = path.trim().split_once('.').ok_or_else(bad)?;
+    let mut path = path.trim().to_string();
+    // A sampling key of the layout before the nesting: its new place.
+    if let Some(moved) = path.strip_prefix("sample.").and_then(crate::learn::sample::settings::moved_path) {
+        log::warn!("--set {path}: now {moved}");
+        path = moved;
+    }
+    // section.key, or section.table.key within a section's table.
+    let (section, key) = path.rsplit_once('.').ok_or_else(bad)?;
+    let (section, key) = (section.to_string(), key.to_string());
+    let (section, key) = (section.as_str(), key.as_str());
     let value = value.trim();
     let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
         .ok()
         .and_then(|mut t| t.remove("v"))
         .unwrap_or_else(|| toml::Value::String(value.to_string()));
-    let sec = table
-        .get_mut(section)
-        .and_then(|s| s.as_table_mut())
-        .ok_or_else(|| Error::Invalid(format!("--set '{spec}': no section '{section}'")))?;
+    let mut sec = Some(&mut *table);
+    for part in section.split('.') {
+        sec = sec.and_then(|s| s.get_mut(part)).and_then(|s| s.as_table_mut());
+    }
+    let sec = sec.ok_or_else(|| Error::Invalid(format!("--set '{spec}': no section '{section}'")))?;
     if !sec.contains_key(key) && OPTIONAL_KEYS.contains(&(section, key)) {
         // Left out at their defaults: typed by the struct when it is read.
         sec.insert(key.to_string(), parsed);
@@ -821,25 +674,30 @@ mod tests {
         let set = paper
             .with_overrides(&[
                 "sample.final_step=update".into(),
-                "sample.attempts=3".into(),
-                "sample.level0_candidates=4".into(),
+                "sample.attempts.count=3".into(),
+                "sample.level0.candidates=4".into(),
+                // The name before the nesting still sets its key.
                 "sample.level0_min_structure=0.7".into(),
                 "train.bf16=true".into(),
             ])
             .unwrap();
         assert_eq!(set.sample.final_step, crate::learn::schedule::FinalStep::Update);
-        assert_eq!((set.sample.attempts, set.sample.level0_candidates, set.sample.level0_min_structure), (3, 4, 0.7));
+        assert_eq!((set.sample.attempts.count, set.sample.level0.candidates, set.sample.level0.min_structure), (3, 4, 0.7));
         assert!(set.train.bf16);
         assert_eq!(paper.with_overrides(&[]).unwrap(), paper, "defaults filled in change nothing");
         assert_eq!(paper.with_overrides(&[]).unwrap().digest(), paper.digest());
         let e = paper.with_overrides(&["sample.final_step=halfway".into()]).unwrap_err().to_string();
         assert!(e.contains("final_step") || e.contains("halfway"), "{e}");
-        assert!(paper.with_overrides(&["sample.attempts=0".into()]).is_err());
-        // resize_max: 0 (never) or a factor of at least the smallest resize.
-        assert_eq!(paper.sample.resize_max, 0.0);
-        assert_eq!(paper.with_overrides(&["sample.resize_max=1.75".into()]).unwrap().sample.resize_max, 1.75);
+        assert!(paper.with_overrides(&["sample.attempts.count=0".into()]).is_err());
+        // resize_max: 0 (never) or a factor of at least the smallest resize,
+        // with the novel pick of several candidates (else it cannot apply).
+        assert_eq!(paper.sample.proposers.resize_max, 0.0);
+        let novel = |more: &str| vec!["sample.level0={candidates = 8, pick = \"novel\"}".to_string(), more.to_string()];
+        assert_eq!(paper.with_overrides(&novel("sample.proposers.resize_max=1.75")).unwrap().sample.proposers.resize_max, 1.75);
+        let e = paper.with_overrides(&["sample.proposers.resize_max=1.75".into()]).unwrap_err().to_string();
+        assert!(e.contains("novel"), "{e}");
         for bad in ["1.1", "5", "-1"] {
-            let e = paper.with_overrides(&[format!("sample.resize_max={bad}")]).unwrap_err().to_string();
+            let e = paper.with_overrides(&novel(&format!("sample.resize_max={bad}"))).unwrap_err().to_string();
             assert!(e.contains("resize_max"), "{e}");
         }
     }

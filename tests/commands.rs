@@ -192,7 +192,7 @@ fn batch_run_skips_a_corrupt_input_and_fails_overall() {
         "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
         "--set", "train.level0_iterations=3", "--set", "train.upper_iterations=30", "--set", "train.upsampler_iterations=30",
         // One coarse shape per variant: these runs test files and stages, not wholeness.
-        "--set", "sample.level0_candidates=1", "--set", "sample.attempts=1",
+        "--set", "sample.level0={candidates = 1}", "--set", "sample.attempts={count = 1}", "--set", "sample.proposers={}",
     ];
     let mut args = vec!["run", good.to_str().unwrap(), corrupt.to_str().unwrap(), aborted.to_str().unwrap(), good2.to_str().unwrap(), "-o", out.to_str().unwrap(), "-n", "1"];
     args.extend(tiny);
@@ -432,7 +432,7 @@ fn slurm_dry_run_writes_the_job_graph_and_stages_fill_one_run_folder() {
         "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
         "--set", "train.level0_iterations=3", "--set", "train.upper_iterations=30", "--set", "train.upsampler_iterations=30",
         // One coarse shape per variant: these runs test files and stages, not wholeness.
-        "--set", "sample.level0_candidates=1", "--set", "sample.attempts=1",
+        "--set", "sample.level0={candidates = 1}", "--set", "sample.attempts={count = 1}", "--set", "sample.proposers={}",
     ];
     let staged = dir.path().join("staged");
     let s = staged.to_str().unwrap();

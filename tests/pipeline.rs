@@ -52,13 +52,13 @@ fn tiny(over: &[&str]) -> Config {
         "sample.level0_steps=8",
         "sample.upper_steps=4",
         // The profile's rejection, made cheap: two candidates, two attempts.
-        "sample.level0_candidates=2",
-        "sample.attempts=2",
+        "sample.level0.candidates=2",
+        "sample.attempts.count=2",
         // f32: these tests compare runs bit for bit (bf16 has its own test)
         "train.bf16=false",
         // The sphere is a figure: these tests follow the networks' passes
         // (bends have their own test).
-        "sample.bend_voxels=0",
+        "sample.proposers.bend_voxels=0",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -387,7 +387,7 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     let levels = sphere_levels(&[8, 16, 32], DVec3::new(0.05, -0.1, 0.0), 0.55);
     // `all`: the sphere's levels stop at 32^3, too coarse to be read as a
     // figure (the reading's own wiring is checked below).
-    let config = tiny(&["sample.bend_voxels=1.5", "sample.bend_exemplars=all", "sample.remove_specks=false", "sample.mend_sheets=false"]);
+    let config = tiny(&["sample.proposers.bend_voxels=1.5", "sample.proposers.bend_exemplars=all", "sample.filters={}"]);
     let models = shapeshifter::learn::sample::untrained_models(&config, 3, Device::Cpu, 3).unwrap();
     let opts = SampleOptions { stop_level: Some(2), ..SampleOptions::from_config(&config, 2, 5) };
     let bent = shapeshifter::learn::sample::sample(&models, &levels, &opts, None).unwrap();
@@ -440,10 +440,9 @@ fn a_pass_with_nothing_new_starts_from_the_exemplar_bent() {
     // the exemplar bent the same way: its finest level is close to that,
     // and further from the exemplar itself.
     let transfer = tiny(&[
-        "sample.bend_voxels=1.5",
-        "sample.bend_exemplars=all",
-        "sample.remove_specks=false",
-        "sample.mend_sheets=false",
+        "sample.proposers.bend_voxels=1.5",
+        "sample.proposers.bend_exemplars=all",
+        "sample.filters={}",
         "encode.sampling_resolution=64",
         "encode.coarsest_resolution=8",
         "encode.finest_resolution=32",

@@ -24,11 +24,11 @@ fn bin() -> &'static str {
 const SMALL: &[&str] = &[
     "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
     "--set", "train.level0_iterations=30", "--set", "train.upper_iterations=30", "--set", "train.upsampler_iterations=30",
-    "--set", "sample.level0_candidates=1", "--set", "sample.attempts=1",
+    "--set", "sample.level0={candidates = 1}", "--set", "sample.attempts={count = 1}", "--set", "sample.proposers={}",
     // Networks of 30 iterations: DDPM's fresh noise at every level-0 step
     // leaves their one candidate empty, DDIM's path does not; these tests
     // are about files and batches, not the sampler.
-    "--set", "sample.level0_sampler=ddim",
+    "--set", "sample.level0.sampler=ddim",
 ];
 
 /// As [`SMALL`] with training long enough (about 10 s on two processes) and
@@ -38,7 +38,7 @@ const SMALL: &[&str] = &[
 const SLOW: &[&str] = &[
     "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
     "--set", "train.level0_iterations=300", "--set", "train.upper_iterations=150", "--set", "train.upsampler_iterations=150",
-    "--set", "sample.level0_candidates=1", "--set", "sample.attempts=1",
+    "--set", "sample.level0={candidates = 1}", "--set", "sample.attempts={count = 1}", "--set", "sample.proposers={}",
 ];
 const SLOW_N: &str = "6";
 
@@ -465,9 +465,9 @@ fn a_run_that_yields_nothing_usable_fails_and_says_where_the_shapes_vanished() {
     let starved = [
         "--set", "encode.sampling_resolution=64", "--set", "encode.finest_resolution=32",
         "--set", "train.level0_iterations=3", "--set", "train.upper_iterations=2", "--set", "train.upsampler_iterations=2",
-        "--set", "sample.attempts=1",
+        "--set", "sample.attempts={count = 1}",
         // A bent exemplar is always usable: no bends, the networks' shapes only.
-        "--set", "sample.bend_voxels=0",
+        "--set", "sample.proposers.bend_voxels=0",
     ];
     let o = shapeshifter(&run_args(out.to_str().unwrap(), "2", &starved));
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));

@@ -56,7 +56,7 @@ pub fn sheet_axis(level: &Level) -> Option<usize> {
 /// ruined tower's columns along its height, against 0.28 at 64^3), and a flat
 /// airplane is a sheet. A level counts where it has no hole along that axis.
 /// Where a variant's holes are counted (`holed`, also at level 0) and,
-/// with `sample.mend_sheets`, along which its levels are mended.
+/// with `sample.filters.mend_sheets`, along which its levels are mended.
 pub fn sheet_axes(exemplar_levels: &[Level]) -> Vec<Option<usize>> {
     let axis = super::levels::structure_level(exemplar_levels).and_then(sheet_axis);
     exemplar_levels.iter().map(|l| axis.filter(|&a| enclosed_columns(l, a).is_empty())).collect()

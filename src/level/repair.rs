@@ -1,7 +1,7 @@
 //! What each level of a variant gets once it is made (by a network or the
 //! detail transfer) and before the next level is made from it: specks
-//! removed (`sample.remove_specks`) and, on a sheet, holes and cracks mended
-//! (`sample.mend_sheets`, [`super::sheet::mend_sheet`]). Decided once
+//! removed (`sample.filters.remove_specks`) and, on a sheet, holes and cracks mended
+//! (`sample.filters.mend_sheets`, [`super::sheet::mend_sheet`]). Decided once
 //! per exemplar level ([`repairs`]), so sampling and the transfer do the same.
 
 use crate::grid::components::component_labels;

@@ -1,7 +1,7 @@
 //! The exemplar at another extent: the paper's resize. Sampling may start
 //! from a level-0 box longer or shorter than the exemplar's along some axes
 //! (`--extent`, or a pass resized because the networks only copy,
-//! `sample.resize_max`); the networks fill the box in their own way (a longer
+//! `sample.proposers.resize_max`); the networks fill the box in their own way (a longer
 //! house gets more windows, not wider ones). Such a variant is judged against
 //! the exemplar at the same extent ([`stretched`]): its size, surface,
 //! openings and copies are measured against what the exemplar would be in
@@ -24,7 +24,7 @@ pub const MAX_LEVEL0_BOX_CUBES: f64 = 64.0;
 /// that extent.
 pub const EXTENT_FILE: &str = "extent.json";
 
-/// The smallest scale of a resized pass's axis (`sample.resize_max` is the
+/// The smallest scale of a resized pass's axis (`sample.proposers.resize_max` is the
 /// largest): a quarter longer is one level-0 voxel more on a 4-voxel side
 /// and a new bay on a house's length.
 pub const RESIZE_MIN_SCALE: f64 = 1.25;

@@ -1,6 +1,6 @@
 //! A smooth random bend of a level: the exemplar deformed into a new pose,
 //! the variant sampling makes where the networks offer nothing new
-//! (`sample.bend_voxels`; docs/lab/bent-figures.md, "Bent starts"). A level-0 network
+//! (`sample.proposers.bend_voxels`; docs/lab/bent-figures.md, "Bent starts"). A level-0 network
 //! that learned one figure with nothing repeated in it (a bunny) draws that
 //! figure again or loses a part of it; a bent exemplar is a new pose of the
 //! whole figure with its own detail and colours. Tried and not kept: the
@@ -158,7 +158,7 @@ impl Warp {
     }
 }
 
-/// The largest `sample.bend_voxels`, in level-0 voxels. A field folds the
+/// The largest `sample.proposers.bend_voxels`, in level-0 voxels. A field folds the
 /// surface over once it moves its centre by about 1.65 of its widths
 /// (sigma, a quarter of the longest side: 4 voxels on a 16-voxel shape),
 /// and the fields add up where they overlap; 2 was measured on the bunny.

@@ -110,8 +110,9 @@ pub fn tiny_trained_run() -> &'static Path {
             "train.level0_iterations=150",
             "train.upper_iterations=60",
             "train.upsampler_iterations=60",
-            "sample.level0_candidates=1",
-            "sample.attempts=1",
+            "sample.level0={candidates = 1}",
+            "sample.attempts={count = 1}",
+            "sample.proposers={}",
             "sample.level0_steps=20",
             "sample.upper_steps=4",
         ] {

@@ -401,7 +401,7 @@ impl EvalReport {
             if st.near_copies * 3 >= st.scored.max(1) {
                 s += &format!(
                     "{} of {} are near copies: the networks draw again what the exemplar has only once (a single building). \
-                     Try --set sample.resize_max=1.5 (variants in longer boxes), --extent, or an exemplar with its parts repeated\n",
+                     Try --set sample.proposers.resize_max=1.5 (variants in longer boxes), --extent, or an exemplar with its parts repeated\n",
                     st.near_copies, st.scored
                 );
             }

@@ -74,6 +74,7 @@ mod models;
 mod options;
 mod proposers;
 mod reverse;
+pub mod settings;
 mod variant;
 #[cfg(test)]
 mod tests;
@@ -150,6 +151,14 @@ pub fn sample_observed(
     let resized_whole = std::cell::Cell::new(false);
     let box_copies = std::cell::Cell::new(0);
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
+    // The proposers start a pass in the exemplar's box: with a box asked for
+    // (`--extent`) or a level to continue from, they are off, and said so.
+    if (opts.bend_voxels > 0.0 || opts.resize_max > 0.0) && (opts.extent != [1.0; 3] || continuing) {
+        let why = if continuing { "continuing from a level" } else { "in the box --extent asks for" };
+        // Said once per process: the pipeline samples one variant per call.
+        static SAID: std::sync::Once = std::sync::Once::new();
+        SAID.call_once(|| log::info!("sample: no bent or resized starts {why}: every variant is the networks' own"));
+    }
     let bending = Bending::of(opts, exemplar_levels, from.is_some());
     let resizing = opts.resize_max > 0.0 && could_bend(opts) && !continuing && !matches!(bending, Bending::Bends(_));
     tch::no_grad(|| {

@@ -39,26 +39,26 @@ pub struct SampleOptions {
     /// structure level (1: one pass, no check).
     pub attempts: usize,
     /// Whether a whole pass that is a near copy is passed over while
-    /// attempts are left (`sample.reject_copies`).
+    /// attempts are left (`sample.attempts.reject_copies`).
     pub reject_copies: bool,
     /// Whether holes through a sheet are closed level by level, where the
-    /// exemplar is one (`sample.mend_sheets`).
+    /// exemplar is one (`sample.filters.mend_sheets`).
     pub mend_sheets: bool,
-    /// Whether every level loses its specks (`sample.remove_specks`).
+    /// Whether every level loses its specks (`sample.filters.remove_specks`).
     pub remove_specks: bool,
     /// A pass whose level-0 candidates are none new enough is instead the
-    /// exemplar bent by up to this many level-0 voxels (`sample.bend_voxels`;
+    /// exemplar bent by up to this many level-0 voxels (`sample.proposers.bend_voxels`;
     /// 0: never). Not written when 0, so the stamps of variants sampled
     /// before it existed still match.
     #[serde(skip_serializing_if = "is_zero")]
     pub bend_voxels: f64,
-    /// Which exemplars are bent (`sample.bend_exemplars`). Not written when
+    /// Which exemplars are bent (`sample.proposers.bend_exemplars`). Not written when
     /// `figures`, the default.
     #[serde(default, skip_serializing_if = "BendExemplars::is_figures")]
     pub bend_exemplars: BendExemplars,
     /// A pass whose level-0 candidates are none new enough, where the
     /// exemplar is not bent, starts instead from a level-0 box resized along
-    /// the exemplar's longer horizontal axis by up to this factor (`sample.resize_max`,
+    /// the exemplar's longer horizontal axis by up to this factor (`sample.proposers.resize_max`,
     /// [`crate::level::resize::Extent::drawn`]; 0: never). Not written when 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub resize_max: f64,
@@ -78,17 +78,17 @@ impl SampleOptions {
             upper_steps: config.sample.upper_steps,
             upper_t_max: config.train.upper_t_max,
             final_step: config.sample.final_step,
-            level0_candidates: config.sample.level0_candidates,
-            level0_min_structure: config.sample.level0_min_structure,
-            level0_pick: config.sample.level0_pick,
-            level0_sampler: config.sample.level0_sampler.or(config.sample.sampler),
-            attempts: config.sample.attempts,
-            reject_copies: config.sample.reject_copies,
-            mend_sheets: config.sample.mend_sheets,
-            remove_specks: config.sample.remove_specks,
-            bend_voxels: config.sample.bend_voxels,
-            bend_exemplars: config.sample.bend_exemplars,
-            resize_max: config.sample.resize_max,
+            level0_candidates: config.sample.level0.candidates,
+            level0_min_structure: config.sample.level0.min_structure,
+            level0_pick: config.sample.level0.pick,
+            level0_sampler: config.sample.level0.sampler.or(config.sample.sampler),
+            attempts: config.sample.attempts.count,
+            reject_copies: config.sample.attempts.reject_copies,
+            mend_sheets: config.sample.filters.mend_sheets,
+            remove_specks: config.sample.filters.remove_specks,
+            bend_voxels: config.sample.proposers.bend_voxels,
+            bend_exemplars: config.sample.proposers.bend_exemplars,
+            resize_max: config.sample.proposers.resize_max,
         }
     }
 }
@@ -99,7 +99,7 @@ pub(super) fn is_zero(v: &f64) -> bool {
 
 /// One sampled variant: the pruned level of each stage produced, coarsest
 /// first, the bend its start was bent by, where it started from the
-/// exemplar bent (`sample.bend_voxels`), and its extent, where its box was
+/// exemplar bent (`sample.proposers.bend_voxels`), and its extent, where its box was
 /// resized.
 #[derive(Clone, Debug)]
 pub struct SampledVariant {

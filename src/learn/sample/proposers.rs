@@ -1,7 +1,7 @@
 //! Where a pass starts, besides the network's own level 0 in the exemplar's
 //! box: the exemplar bent (a figure with nothing repeated in it,
-//! `sample.bend_voxels`), or a resized box (`--extent`, or
-//! `sample.resize_max` where the networks only copy) judged against the
+//! `sample.proposers.bend_voxels`), or a resized box (`--extent`, or
+//! `sample.proposers.resize_max` where the networks only copy) judged against the
 //! exemplar at that extent ([`AtExtent`]).
 
 use glam::IVec3;
@@ -20,7 +20,7 @@ use super::options::SampleOptions;
 use crate::level::resize::level0_box;
 
 /// Whether sampling bends a pass whose level-0 candidates are none new
-/// enough (`sample.bend_voxels`, `sample.bend_exemplars`).
+/// enough (`sample.proposers.bend_voxels`, `sample.proposers.bend_exemplars`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum Bending {
     /// No bends asked for, or none possible (not the novel pick of several

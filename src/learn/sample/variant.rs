@@ -314,10 +314,10 @@ impl OneVariant<'_> {
                 // Where the networks only copy, bends and resizes are what give a new shape.
                 match self.bending {
                     Bending::Never if opts.bend_voxels == 0.0 && could_bend(opts) => {
-                        "; for a figure with nothing repeated in it (a statue, an animal), --set sample.bend_voxels=2 poses it anew"
+                        "; for a figure with nothing repeated in it (a statue, an animal), --set sample.proposers.bend_voxels=2 poses it anew"
                     }
                     Bending::NotAFigure if opts.resize_max == 0.0 => {
-                        "; the networks copy what appears once in the exemplar: --set sample.resize_max=1.5 draws longer boxes instead (a longer house), or try --extent"
+                        "; the networks copy what appears once in the exemplar: --set sample.proposers.resize_max=1.5 draws longer boxes instead (a longer house), or try --extent"
                     }
                     _ => "",
                 }
