@@ -109,7 +109,7 @@ pub struct Verdict {
     /// exemplar has fewer than `min_exemplar_thin_share` of them). Not a
     /// term of `score`: the level-0 gate scores 16^3 shapes, where an ear is
     /// a voxel or two.
-    #[serde(default = "crate::config::one_f64")]
+    #[serde(default = "one")]
     pub thin_ratio: f64,
     /// Where the exemplar is a sheet (`Structure::sheet_axis`), the columns
     /// inside the variant's footprint with no surface along that axis: holes
@@ -449,4 +449,9 @@ impl Verdict {
     ) -> Self {
         Self::with_pose(shape_level, s, at_extent.0, at_extent.1, (style.0, at_extent.1), p)
     }
+}
+
+/// A ratio's serde default where the field was not written: 1, the exemplar's.
+fn one() -> f64 {
+    1.0
 }
