@@ -116,3 +116,25 @@ fn ladder_and_contact_sheet_commands() {
     let o = shapeshifter(&["ladder", bad.to_str().unwrap(), "-o", dir.path().join("l2").to_str().unwrap(), "--profile", "none"]);
     assert_clean_failure(&o, "nothing_here", "manifest");
 }
+
+/// Encoded with its finest level at the structure level (64^3), the ladder
+/// still runs every check that means something there and passes; the
+/// smoothing rungs' order and flags are named as skipped, not failed.
+#[test]
+fn the_ladder_holds_when_the_finest_level_is_the_structure_level() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = Config::load("demo", &["encode.finest_resolution=64".into()]).unwrap();
+    let mesh = exemplar::ruined_tower(&Default::default());
+    let enc = dir.path().join("exemplar64");
+    pipeline::encode_stage(&shapeshifter::io::exemplar::Exemplar::Mesh(mesh), "demo", "0", &config, &enc).unwrap();
+    let out = dir.path().join("lad64");
+    let o = shapeshifter(&["ladder", enc.to_str().unwrap(), "-o", out.to_str().unwrap(), "--profile", "none"]);
+    let text = stdout(&o);
+    assert!(o.status.success(), "{text}\n{}", stderr(&o));
+    assert!(text.contains("skipped: the smoothing rungs' order") && !text.contains("FAILS"), "{text}");
+    // The structural rungs are still checked, and hold.
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("ladder.json")).unwrap()).unwrap();
+    let checks = json["checks"].as_array().expect("checks");
+    assert!(checks.iter().any(|c| c["rung"] == "torn" && c["ok"] == true), "{checks:?}");
+    assert!(checks.len() >= 20, "{} checks", checks.len());
+}

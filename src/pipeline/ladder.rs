@@ -132,7 +132,11 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
     if !colourful {
         skipped.push("colour expectations: the exemplar has one colour (nothing to wash out or shuffle)".into());
     }
-    let checks = ladder::check(&evaluation.report.variants, colourful);
+    let finer_than_structure = finest.resolution > crate::judge::STRUCTURE_RESOLUTION;
+    if !finer_than_structure {
+        skipped.push(ladder::skipped_at_the_structure_level().into());
+    }
+    let checks = ladder::check(&evaluation.report.variants, colourful, finer_than_structure);
     let entries: Vec<(String, Level)> = files.into_iter().map(|f| (f.name, f.finest)).collect();
     write_contact_sheet(&out.join(super::layout::CONTACT_SHEET), &entries, &crate::render::SheetOptions::default())?;
     let outcome = LadderOutcome { options, evaluation, checks, skipped };
