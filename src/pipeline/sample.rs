@@ -412,6 +412,13 @@ pub struct SampleRecord {
     pub files: Vec<super::layout::OutputFile>,
 }
 
+/// `N variants -> OUTPUT`.
+impl std::fmt::Display for SampleRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} variants -> {}", self.variants, self.output.display())
+    }
+}
+
 /// The `sample` command: variants of the exemplar encoded in `dir` from its
 /// trained models into `output` ([`sample_into`]), under the configuration
 /// recorded at training time with the request's overrides.
