@@ -14,6 +14,7 @@ use shapeshifter::render::RenderOptions;
 mod args;
 pub use args::*;
 
+/// Log lines on stderr, as many as `--quiet` and `-v` ask for (`RUST_LOG` overrides).
 pub fn init_logging(cli: &Cli) {
     let level = if cli.quiet {
         "error"
@@ -56,7 +57,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             } else {
                 print_lines(&report.info_lines());
             }
-            Ok(exit(report.exit_status()))
+            Ok(ExitCode::from(report.exit_status()))
         }
         Command::Encode { meshes, output, sampling_resolution, coarsest, finest, pooling, preview, points, view, exemplar, batch } => {
             let previews = preview.then(|| render_options(&view));
@@ -194,7 +195,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Compare { a, b } => {
             let report = shapeshifter::io::dataset::compare_levels(&a, &b)?;
             print!("{report}");
-            Ok(exit(report.exit_status()))
+            Ok(ExitCode::from(report.exit_status()))
         }
         Command::Studio { dir, port, device, precision } => {
             // Whether the thread count was chosen: clap's default looks the
@@ -213,7 +214,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let request = pipeline::LadderRequest { dir: &dir, output: &output, profile: profile.as_deref(), device_spec: &device };
             let record = pipeline::ladder_command(&request, &mut |line| println!("{line}"))?;
             print!("{record}");
-            Ok(exit(record.exit_status()?))
+            Ok(ExitCode::from(record.exit_status()?))
         }
     }
 }
@@ -234,7 +235,7 @@ fn run_many(exemplars: pipeline::run::Exemplars, output: &std::path::Path, args:
         json: args.json,
         wait,
     };
-    Ok(exit(pipeline::run::run_command(exemplars, output, &request, print_lines)?))
+    Ok(ExitCode::from(pipeline::run::run_command(exemplars, output, &request, print_lines)?))
 }
 
 /// A batch conversion's report: as JSON on request, else its lines.
@@ -244,7 +245,7 @@ fn finish_batch<T: serde::Serialize>(converted: &pipeline::batch::Converted<T>, 
     } else {
         print_lines(&converted.lines());
     }
-    Ok(exit(converted.exit_status()))
+    Ok(ExitCode::from(converted.exit_status()))
 }
 
 /// A command's human output, each piece to its stream, in order.
@@ -255,10 +256,6 @@ fn print_lines(lines: &[Line]) {
             Line::Error(e) => eprintln!("error: {e}"),
         }
     }
-}
-
-fn exit(status: u8) -> ExitCode {
-    ExitCode::from(status)
 }
 
 // What clap parsed, as the library's requests: field for field, no choices.

@@ -8,8 +8,8 @@ use clap::{Parser, Subcommand};
 
 use shapeshifter::encode::Pooling;
 use shapeshifter::io::vdb;
-use shapeshifter::level::edit;
 use shapeshifter::pipeline::mesh::{MeshFormat, MethodChoice};
+use shapeshifter::pipeline::sample::{parse_extent, Extent};
 use shapeshifter::pipeline::DEFAULT_PROFILE;
 
 #[derive(Parser, Debug)]
@@ -597,16 +597,4 @@ pub struct ViewArgs {
     /// Splat radius in voxel sizes.
     #[arg(long, default_value_t = 0.9)]
     pub point_size: f32,
-}
-
-/// `--extent X,Y,Z`: three positive scales (a bad one is a usage error, exit 2).
-#[derive(Clone, Copy, Debug)]
-pub struct Extent(pub [f32; 3]);
-
-fn parse_extent(text: &str) -> std::result::Result<Extent, String> {
-    match edit::parse_vec3(text) {
-        Some(v) if v.iter().all(|e| e.is_finite() && *e > 0.0) => Ok(Extent(v)),
-        Some(_) => Err("each scale must be a positive number".into()),
-        None => Err("expected three numbers X,Y,Z (e.g. 2,1,1)".into()),
-    }
 }

@@ -205,6 +205,26 @@ mod tests {
         assert!(output_names(&paths(&["tower.obj", "tower.obj"])).unwrap_err().to_string().contains("given twice"));
     }
 
+    /// Each input's line (its output, or its error for stderr) in input
+    /// order, then the summary; one input is written to OUT itself.
+    #[test]
+    fn conversions_are_told_line_by_line_then_summed_up() {
+        let inputs = paths(&["a/x.obj", "b/y.obj"]);
+        let names = output_names(&inputs).unwrap();
+        let report = run(&inputs, &names, 1, |p, name| match p.ends_with("y.obj") {
+            true => Err("bad".to_string()),
+            false => Ok((Some(target(Path::new("out"), name, true, Some("ply"))), ())),
+        });
+        let told = Converted { report, what: "mesh", folder: Some(PathBuf::from("out")) };
+        let lines = told.lines();
+        assert!(matches!(&lines[0], Line::Out(l) if l.starts_with("a/x.obj -> out/x.ply (") && l.ends_with(" s)\n")), "{lines:?}");
+        assert_eq!(lines[1], Line::Error("bad".into()));
+        assert!(matches!(&lines[2], Line::Out(l) if l.starts_with("mesh: 1 of 2 done, 1 failed") && l.ends_with(" -> out\n")), "{lines:?}");
+        assert_eq!((lines.len(), told.exit_status()), (3, 1));
+        assert_eq!(target(Path::new("one.ply"), "x", false, Some("ply")), Path::new("one.ply"));
+        assert_eq!(target(Path::new("out"), "x", true, None), Path::new("out/x"));
+    }
+
     #[test]
     fn failures_are_isolated_and_in_order() {
         let inputs = paths(&["a", "bad", "c", "panics"]);
