@@ -173,6 +173,20 @@ impl LevelComparison {
     pub fn identical(&self) -> usize {
         self.compared - (self.differences.len() - self.only_in_b)
     }
+
+    /// The `compare` command's exit status: 0 when level files were compared
+    /// and none differs, else 1 (no level file at all proves nothing).
+    pub fn exit_status(&self) -> u8 {
+        u8::from(!(self.differences.is_empty() && self.compared > 0))
+    }
+}
+
+/// `N level files compared: M identical`, then one line per difference.
+impl std::fmt::Display for LevelComparison {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "{} level files compared: {} identical", self.compared, self.identical())?;
+        self.differences.iter().try_for_each(|d| writeln!(f, "  differs: {d}"))
+    }
 }
 
 /// Every `level_K.vdb` under `a` (recursively) against the file at the same

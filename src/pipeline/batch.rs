@@ -13,6 +13,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::command::Line;
 use crate::error::{Error, Result};
 
 /// The distinct output names of `inputs`, in order: the shortest trailing
@@ -82,6 +83,11 @@ impl<T> Report<T> {
         self.outcomes.iter().filter(|o| o.error.is_some()).count()
     }
 
+    /// 1 when any input failed ([`super::command::exit_status`]).
+    pub fn exit_status(&self) -> u8 {
+        super::command::exit_status(self.failed())
+    }
+
     /// `encode: 12 of 13 done, 1 failed, 8.3 s on 2 threads -> OUT`.
     pub fn summary(&self, what: &str, out: Option<&Path>) -> String {
         let n = self.outcomes.len();
@@ -95,6 +101,54 @@ impl<T> Report<T> {
             s += &format!(" -> {}", o.display());
         }
         s
+    }
+}
+
+/// A batch conversion's outcome (`encode`, `mesh`, `points`): its report
+/// (what `--json` prints) and how it is told to a person.
+#[derive(Clone, Debug)]
+pub struct Converted<T> {
+    pub report: Report<T>,
+    /// The command's name, for the summary line.
+    pub what: &'static str,
+    /// The folder the outputs went into, when there were several inputs.
+    pub folder: Option<PathBuf>,
+}
+
+impl<T> Converted<T> {
+    /// One line per input (`IN -> OUT (S s)`, or its error) and, for
+    /// several inputs, the summary ([`Report::summary`]).
+    pub fn lines(&self) -> Vec<Line> {
+        let mut lines: Vec<Line> = self
+            .report
+            .outcomes
+            .iter()
+            .filter_map(|o| match (&o.output, &o.error) {
+                (_, Some(e)) => Some(Line::Error(e.clone())),
+                (Some(out), None) => Some(Line::Out(format!("{} -> {} ({:.1} s)\n", o.input.display(), out.display(), o.seconds))),
+                (None, None) => None,
+            })
+            .collect();
+        if self.report.outcomes.len() > 1 {
+            lines.push(Line::Out(format!("{}\n", self.report.summary(self.what, self.folder.as_deref()))));
+        }
+        lines
+    }
+
+    /// 1 when any input failed.
+    pub fn exit_status(&self) -> u8 {
+        self.report.exit_status()
+    }
+}
+
+/// Where a batch command writes the input named `name` (from
+/// [`output_names`]): `output` itself when it is the only input, else
+/// `output/NAME.EXT`, or the folder `output/NAME` with `ext` None.
+pub fn target(output: &Path, name: &str, several: bool, ext: Option<&str>) -> PathBuf {
+    match ext {
+        _ if !several => output.to_path_buf(),
+        Some(ext) => output.join(format!("{name}.{ext}")),
+        None => output.join(name),
     }
 }
 
@@ -149,6 +203,26 @@ mod tests {
         // Same stem, different extensions: the stems collide at every depth.
         assert!(output_names(&paths(&["x/tower.obj", "x/tower.ply"])).unwrap_err().to_string().contains("both be written as 'x_tower'"));
         assert!(output_names(&paths(&["tower.obj", "tower.obj"])).unwrap_err().to_string().contains("given twice"));
+    }
+
+    /// Each input's line (its output, or its error for stderr) in input
+    /// order, then the summary; one input is written to OUT itself.
+    #[test]
+    fn conversions_are_told_line_by_line_then_summed_up() {
+        let inputs = paths(&["a/x.obj", "b/y.obj"]);
+        let names = output_names(&inputs).unwrap();
+        let report = run(&inputs, &names, 1, |p, name| match p.ends_with("y.obj") {
+            true => Err("bad".to_string()),
+            false => Ok((Some(target(Path::new("out"), name, true, Some("ply"))), ())),
+        });
+        let told = Converted { report, what: "mesh", folder: Some(PathBuf::from("out")) };
+        let lines = told.lines();
+        assert!(matches!(&lines[0], Line::Out(l) if l.starts_with("a/x.obj -> out/x.ply (") && l.ends_with(" s)\n")), "{lines:?}");
+        assert_eq!(lines[1], Line::Error("bad".into()));
+        assert!(matches!(&lines[2], Line::Out(l) if l.starts_with("mesh: 1 of 2 done, 1 failed") && l.ends_with(" -> out\n")), "{lines:?}");
+        assert_eq!((lines.len(), told.exit_status()), (3, 1));
+        assert_eq!(target(Path::new("one.ply"), "x", false, Some("ply")), Path::new("one.ply"));
+        assert_eq!(target(Path::new("out"), "x", true, None), Path::new("out/x"));
     }
 
     #[test]

@@ -227,6 +227,37 @@ pub fn submit(meshes: &[PathBuf], output: &Path, config: &Config, opts: &GraphOp
     Ok(())
 }
 
+/// What a user asks of the `slurm` command.
+pub struct SlurmRequest<'a> {
+    pub meshes: &'a [PathBuf],
+    pub output: &'a Path,
+    pub n: usize,
+    pub seed: u64,
+    pub profile: &'a str,
+    pub overrides: &'a [String],
+    pub partition: Option<&'a str>,
+    pub gpus_per_job: u32,
+    /// Only write the scripts.
+    pub dry_run: bool,
+}
+
+/// The `slurm` command: the configuration checked (a bad profile or
+/// `--set` is [`Error::Usage`]), then [`submit`] with jobs that run this
+/// program; `report` as there.
+pub fn slurm_command(r: &SlurmRequest, report: impl FnMut(&str)) -> Result<()> {
+    let config = Config::load(r.profile, r.overrides)?;
+    let opts = GraphOptions {
+        binary: super::run::this_program()?,
+        profile: r.profile.to_string(),
+        overrides: r.overrides.to_vec(),
+        n: r.n,
+        seed: r.seed,
+        partition: r.partition.map(str::to_string),
+        gpus_per_job: r.gpus_per_job,
+    };
+    submit(r.meshes, r.output, &config, &opts, r.dry_run, report)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

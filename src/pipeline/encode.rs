@@ -133,3 +133,79 @@ fn encoding(options: &EncodeOptions, stats: &encode::EncodeStats) -> dataset::En
 pub fn write_preview(level: &Level, options: &RenderOptions, path: &Path) -> Result<()> {
     render::save_png(&render::render_level(level, options)?, path)
 }
+
+/// How an exemplar file is read, as a user gave it (`--voxel-size`, `--up`,
+/// the point-cloud options): each setting given replaces the profile's,
+/// each left out keeps it.
+#[derive(Clone, Debug, Default)]
+pub struct ExemplarSettings {
+    pub voxel_size: Option<f64>,
+    pub up: Option<crate::level::Up>,
+    pub cloud_colour: Option<crate::io::cloud::CloudColour>,
+    pub normal_orientation: Option<crate::geom::normals::Orientation>,
+    pub normal_neighbours: Option<usize>,
+    /// Estimate normals even where the file has them (false: as the profile says).
+    pub estimate_normals: bool,
+}
+
+impl ExemplarSettings {
+    /// Sets what was given into `c`.
+    pub fn apply(&self, c: &mut crate::config::EncodeConfig) {
+        if self.voxel_size.is_some() {
+            c.voxel_size = self.voxel_size;
+        }
+        if self.up.is_some() {
+            c.up = self.up;
+        }
+        if let Some(v) = self.cloud_colour {
+            c.cloud_colour = v;
+        }
+        if let Some(v) = self.normal_orientation {
+            c.normal_orientation = v;
+        }
+        if let Some(v) = self.normal_neighbours {
+            c.normal_neighbours = v;
+        }
+        if self.estimate_normals {
+            c.estimate_normals = true;
+        }
+    }
+}
+
+/// What a user asks of the `encode` command.
+pub struct EncodeRequest<'a> {
+    pub meshes: &'a [std::path::PathBuf],
+    /// The folder of the levels (one input), or of one folder per input.
+    pub output: &'a Path,
+    pub sampling_resolution: u32,
+    pub coarsest: u32,
+    pub finest: u32,
+    pub pooling: crate::encode::Pooling,
+    pub exemplar: &'a ExemplarSettings,
+    /// Write `level_K.png` previews with these options.
+    pub previews: Option<&'a RenderOptions>,
+    pub points: crate::io::vdb::PointsLayout,
+    /// Files encoded at once (0: one per core).
+    pub jobs: usize,
+}
+
+/// The `encode` command: the settings checked before anything is written
+/// (invalid ones are [`Error::Usage`]), then every mesh encoded
+/// ([`encode_file`]) into `output` (one input) or `output/NAME`; each
+/// input's voxel counts per level, or its error.
+pub fn encode_command(r: &EncodeRequest) -> Result<super::batch::Converted<Vec<usize>>> {
+    use super::batch;
+    let mut settings = crate::config::EncodeConfig::grids(r.sampling_resolution, r.coarsest, r.finest, r.pooling);
+    r.exemplar.apply(&mut settings);
+    let options = command_options(&settings)?;
+    let write = WriteOptions { points: r.points, ..Default::default() };
+    let names = batch::output_names(r.meshes)?;
+    let several = r.meshes.len() > 1;
+    let report = batch::run(r.meshes, &names, r.jobs, |mesh_path, name| {
+        let dir = batch::target(r.output, name, several, None);
+        let manifest = encode_file(mesh_path, &dir, &options, r.previews, write).map_err(|e| e.to_string())?;
+        let voxels: Vec<usize> = manifest.levels.iter().map(|l| l.voxels).collect();
+        Ok((Some(dir), voxels))
+    });
+    Ok(batch::Converted { report, what: "encode", folder: several.then(|| r.output.to_path_buf()) })
+}

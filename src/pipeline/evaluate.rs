@@ -182,3 +182,30 @@ pub fn render_inputs(inputs: &[PathBuf], output: &Path, options: &render::Render
     render::save_png(&img, output)?;
     Ok(None)
 }
+
+/// What a user asks of the `eval` command.
+pub struct EvalRequest<'a> {
+    /// The encoded exemplar's folder.
+    pub exemplar: &'a Path,
+    /// Variant folders.
+    pub variants: &'a [PathBuf],
+    /// The exemplar mesh: with it (and a mesh in every variant), shapes are
+    /// voxelised as solids.
+    pub exemplar_mesh: Option<&'a Path>,
+    /// Solid voxelisation: voxels along the exemplar's longest axis.
+    pub resolution: u32,
+    /// Where the report's JSON goes, if anywhere.
+    pub output: Option<&'a Path>,
+}
+
+/// The `eval` command: the variants scored against the exemplar
+/// ([`crate::eval::evaluate::evaluate`]), the report written where asked.
+pub fn eval_command(r: &EvalRequest) -> Result<crate::eval::evaluate::Evaluation> {
+    let mesh = r.exemplar_mesh.map(crate::io::mesh::load).transpose()?;
+    let files = r.variants.iter().map(|d| crate::eval::evaluate::read_variant(d)).collect::<Result<Vec<_>>>()?;
+    let evaluation = crate::eval::evaluate::evaluate(r.exemplar, mesh.as_ref(), &files, r.resolution)?;
+    if let Some(out) = r.output {
+        evaluation.write_json(out)?;
+    }
+    Ok(evaluation)
+}

@@ -19,9 +19,10 @@ use crate::util::fs::write_file;
 /// The configuration of the ladder's untrained rung, and where it came
 /// from (said in the command's output): `profile` when given (`none`: no
 /// untrained rung), else the `config.toml` of `dir/models` or
-/// `dir/../models` (a run's layout), else the `cpu` profile.
+/// `dir/../models` (a run's layout), else [`super::run::DEFAULT_PROFILE`].
 pub fn ladder_config(dir: &Path, profile: Option<&str>) -> Result<(Option<Config>, String)> {
     use super::layout::{CONFIG, MODELS_DIR};
+    use super::run::DEFAULT_PROFILE;
     Ok(match profile {
         Some("none") => (None, "none (--profile none)".into()),
         Some(p) => (Some(Config::load(p, &[])?), format!("the '{p}' profile (--profile)")),
@@ -30,13 +31,19 @@ pub fn ladder_config(dir: &Path, profile: Option<&str>) -> Result<(Option<Config
             match found {
                 Some(p) => (Some(Config::read(&p)?), format!("the configuration of {}", p.display())),
                 None => (
-                    Some(Config::load("cpu", &[])?),
-                    format!("the 'cpu' profile: no {CONFIG} in {0}/{MODELS_DIR} or {0}/../{MODELS_DIR} (--profile P to choose, none to skip)", dir.display()),
+                    Some(Config::load(DEFAULT_PROFILE, &[])?),
+                    format!(
+                        "the '{DEFAULT_PROFILE}' profile: no {CONFIG} in {0}/{MODELS_DIR} or {0}/../{MODELS_DIR} (--profile P to choose, none to skip)",
+                        dir.display()
+                    ),
                 ),
             }
         }
     })
 }
+
+/// The ladder's record in its output folder.
+pub const LADDER_JSON: &str = "ladder.json";
 
 /// The degradation ladder of an encoded exemplar, scored.
 #[derive(Clone, Debug, Serialize)]
@@ -140,8 +147,71 @@ pub fn ladder_stage(exemplar_dir: &Path, out: &Path, config: Option<&Config>, de
     let entries: Vec<(String, Level)> = files.into_iter().map(|f| (f.name, f.finest)).collect();
     write_contact_sheet(&out.join(super::layout::CONTACT_SHEET), &entries, &crate::render::SheetOptions::default())?;
     let outcome = LadderOutcome { options, evaluation, checks, skipped };
-    let path = out.join("ladder.json");
+    let path = out.join(LADDER_JSON);
     let text = serde_json::to_string_pretty(&outcome).map_err(|e| Error::file(&path, e.to_string()))?;
     write_file(&path, &text)?;
     Ok(outcome)
+}
+
+/// What a user asks of the `ladder` command.
+pub struct LadderRequest<'a> {
+    /// The encoded exemplar's folder.
+    pub dir: &'a Path,
+    pub output: &'a Path,
+    /// The untrained rung's configuration ([`ladder_config`]).
+    pub profile: Option<&'a str>,
+    pub device_spec: &'a str,
+}
+
+/// The `ladder` command's outcome, and where it went.
+pub struct LadderRecord {
+    pub outcome: LadderOutcome,
+    pub dir: std::path::PathBuf,
+    pub output: std::path::PathBuf,
+}
+
+/// The `ladder` command: the untrained rung's configuration (told to
+/// `tell` at once, as one line, before the minutes the ladder takes), then
+/// [`ladder_stage`].
+pub fn ladder_command(r: &LadderRequest, tell: &mut dyn FnMut(&str)) -> Result<LadderRecord> {
+    let (config, from) = ladder_config(r.dir, r.profile)?;
+    tell(&format!("untrained rung: {from}"));
+    let device = super::run::device(r.device_spec)?;
+    let outcome = ladder_stage(r.dir, r.output, config.as_ref(), device)?;
+    Ok(LadderRecord { outcome, dir: r.dir.to_path_buf(), output: r.output.to_path_buf() })
+}
+
+impl LadderRecord {
+    /// 0 when every check of the expected order holds, 1 when one fails; an
+    /// error when no check could run (nothing was judged).
+    pub fn exit_status(&self) -> Result<u8> {
+        if self.outcome.checks.is_empty() {
+            return Err(Error::file(&self.dir, "no check of the expected order could run (every rung skipped?)"));
+        }
+        Ok(super::command::exit_status(self.outcome.failed().count()))
+    }
+}
+
+/// The scores' table, the rungs skipped, how many checks hold and each
+/// that fails.
+impl std::fmt::Display for LadderRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let o = &self.outcome;
+        f.write_str(&o.evaluation.table())?;
+        for s in &o.skipped {
+            writeln!(f, "skipped: {s}")?;
+        }
+        let failed: Vec<_> = o.failed().collect();
+        writeln!(
+            f,
+            "expected order: {} of {} checks hold -> {}",
+            o.checks.len() - failed.len(),
+            o.checks.len(),
+            self.output.join(LADDER_JSON).display()
+        )?;
+        for c in &failed {
+            writeln!(f, "  FAILS {} on {}: {:.4} vs exemplar {:.4} ({})", c.metric, c.rung, c.value, c.exemplar, c.requirement)?;
+        }
+        Ok(())
+    }
 }

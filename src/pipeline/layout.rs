@@ -179,6 +179,15 @@ impl RunPaths {
     pub fn new(root: &Path) -> Self {
         RunPaths { root: root.to_path_buf() }
     }
+
+    /// The run folder `root`, which must exist: a command on a run refuses
+    /// a missing folder rather than make one (and a lock file in it).
+    pub fn existing(root: &Path) -> Result<Self> {
+        if !root.is_dir() {
+            return Err(Error::file(root, "no such run folder"));
+        }
+        Ok(Self::new(root))
+    }
     pub fn config(&self) -> PathBuf {
         self.root.join(CONFIG)
     }

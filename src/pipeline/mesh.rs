@@ -270,3 +270,100 @@ pub fn points_file(input: &Path, target: &Path, make_folder: bool) -> Result<usi
     crate::io::mesh::save_points_ply(target, &p.positions, &p.normals, &p.colours)?;
     Ok(p.positions.len())
 }
+
+/// Mesh formats that keep vertex colours (`mesh --format`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum MeshFormat {
+    Ply,
+    Glb,
+}
+
+impl std::fmt::Display for MeshFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            MeshFormat::Ply => "ply",
+            MeshFormat::Glb => "glb",
+        })
+    }
+}
+
+/// `mesh --method`: a meshing method, or the one the exemplar calls for.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum MethodChoice {
+    Auto,
+    Poisson,
+    Apss,
+}
+
+impl MethodChoice {
+    /// The method chosen; None: the exemplar's openness picks ([`mesh_level`]).
+    pub fn method(self) -> Option<crate::recon::Method> {
+        match self {
+            MethodChoice::Auto => None,
+            MethodChoice::Poisson => Some(crate::recon::Method::Poisson),
+            MethodChoice::Apss => Some(crate::recon::Method::Apss),
+        }
+    }
+}
+
+/// What a user asks of the `mesh` command.
+pub struct MeshRequest<'a> {
+    pub inputs: &'a [PathBuf],
+    /// The mesh file (one input; its extension is the format) or the folder.
+    pub output: &'a Path,
+    /// Each mesh's format when there are several inputs.
+    pub format: MeshFormat,
+    pub method: MethodChoice,
+    /// Contouring cells along the longest axis (None: the method's default).
+    pub resolution: Option<u32>,
+    /// Or as an octree depth: 2^depth cells.
+    pub depth: Option<u32>,
+    /// Decimate to at most this many triangles (0: keep them all).
+    pub faces: usize,
+    /// A picture of the mesh (one input only).
+    pub preview: Option<&'a Path>,
+    /// Files meshed at once (0: one per core).
+    pub jobs: usize,
+}
+
+/// The `mesh` command: what would drop the colours, or a preview of
+/// several meshes, is refused before any work ([`Error::Usage`]); then every
+/// level file is meshed ([`mesh_file`]) into `output` (one input) or
+/// `output/NAME.FORMAT`.
+pub fn mesh_command(r: &MeshRequest) -> Result<super::batch::Converted<MeshedSummary>> {
+    use super::batch;
+    let resolution = r.resolution.or(r.depth.map(|d| 1 << d));
+    let several = r.inputs.len() > 1;
+    let ext = if several {
+        r.format.to_string()
+    } else {
+        r.output.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default()
+    };
+    if !crate::io::mesh::COLOUR_EXTENSIONS.contains(&ext.as_str()) {
+        return Err(Error::Usage(format!("{}: mesh writes .ply or .glb (vertex colours), not '.{ext}'", r.output.display())));
+    }
+    if several && r.preview.is_some() {
+        return Err(Error::Usage("--preview takes one input (several: run `render` on the meshes)".into()));
+    }
+    let names = batch::output_names(r.inputs)?;
+    let report = batch::run(r.inputs, &names, r.jobs, |input, name| {
+        let target = batch::target(r.output, name, several, Some(&ext));
+        let summary = mesh_file(input, &target, several, r.method.method(), resolution, r.faces, r.preview).map_err(|e| e.to_string())?;
+        Ok((Some(target), summary))
+    });
+    Ok(batch::Converted { report, what: "mesh", folder: several.then(|| r.output.to_path_buf()) })
+}
+
+/// The `points` command: every level file's points ([`points_file`]) into
+/// `output` (one input) or `output/NAME.ply`; each input's point count.
+pub fn points_command(inputs: &[PathBuf], output: &Path, jobs: usize) -> Result<super::batch::Converted<usize>> {
+    use super::batch;
+    let several = inputs.len() > 1;
+    let names = batch::output_names(inputs)?;
+    let report = batch::run(inputs, &names, jobs, |input, name| {
+        let target = batch::target(output, name, several, Some("ply"));
+        let count = points_file(input, &target, several).map_err(|e| e.to_string())?;
+        Ok((Some(target), count))
+    });
+    Ok(batch::Converted { report, what: "points", folder: several.then(|| output.to_path_buf()) })
+}

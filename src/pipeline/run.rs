@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 use crate::eval::evaluate::Evaluation;
 use crate::learn::sample::SampleOptions;
 
+use super::command::Line;
 use super::{ExemplarSource, RunPaths};
 
 /// What `run` needs besides the exemplar and the folder.
@@ -68,26 +69,42 @@ pub struct RunRequest<'a> {
     pub overrides: &'a [String],
     /// Settings of how the exemplar file is read, given on the command line
     /// (scale, up axis, point-cloud options), applied over the profile's.
-    pub exemplar: &'a dyn Fn(&mut crate::config::EncodeConfig),
+    pub exemplar: &'a super::ExemplarSettings,
     /// `--device`: cpu, cuda, cuda:N or auto.
     pub device_spec: &'a str,
     pub n: usize,
     pub seed: u64,
     pub jobs: usize,
     pub threads: i32,
+    /// Progress bars may be drawn (not with `--quiet` or other progress lines).
     pub progress: bool,
+    /// One JSON record per exemplar instead of the summary; no progress
+    /// bars then, as the records are for scripts and task graphs, which
+    /// have no terminal to draw them on.
+    pub json: bool,
     /// Wait for another writer of the folder instead of refusing at once.
     pub wait: bool,
 }
 
+/// The profile a command that trains uses when none is given (`train`,
+/// `run` on a file, `stage encode`, `slurm`, the ladder's untrained rung
+/// without a run's configuration): sized for a CPU.
+pub const DEFAULT_PROFILE: &str = "cpu";
+
 /// The profile a run uses when none is given: the demo's own (sized for its
-/// 10-minute budget) for the embedded exemplar, `cpu` for a file.
+/// 10-minute budget) for the embedded exemplar, [`DEFAULT_PROFILE`] for a file.
 pub fn default_profile(exemplar: ExemplarSource) -> &'static str {
     if matches!(exemplar, ExemplarSource::Demo) {
         "demo"
     } else {
-        "cpu"
+        DEFAULT_PROFILE
     }
+}
+
+/// This program, for the child processes and job scripts that run its
+/// other commands.
+pub fn this_program() -> Result<PathBuf> {
+    std::env::current_exe().map_err(|e| Error::Invalid(format!("cannot find this program for its child processes: {e}")))
 }
 
 /// The device `--device SPEC` names (cpu, cuda, cuda:N, auto), with a log
@@ -102,7 +119,7 @@ pub fn device(spec: &str) -> Result<tch::Device> {
 /// settings; any of them invalid is [`Error::Usage`] (nothing was done).
 pub fn run_config(exemplar: ExemplarSource, r: &RunRequest) -> Result<Config> {
     let mut config = Config::load(r.profile.unwrap_or(default_profile(exemplar)), r.overrides)?;
-    (r.exemplar)(&mut config.encode);
+    r.exemplar.apply(&mut config.encode);
     super::encode_options(&config).validate().map_err(Error::usage)?;
     Ok(config)
 }
@@ -113,7 +130,7 @@ pub fn run_exemplar(exemplar: ExemplarSource, out: &Path, r: &RunRequest) -> Res
     let config = run_config(exemplar, r)?;
     let _lock = crate::util::lock::lock(out, crate::util::lock::Mode::Exclusive, r.wait, "run")?;
     let device = device(r.device_spec)?;
-    let exe = std::env::current_exe().map_err(|e| Error::Invalid(format!("cannot find this program for its child processes: {e}")))?;
+    let exe = this_program()?;
     let options = RunOptions {
         config,
         device,
@@ -122,7 +139,7 @@ pub fn run_exemplar(exemplar: ExemplarSource, out: &Path, r: &RunRequest) -> Res
         seed: r.seed,
         jobs: r.jobs,
         threads: r.threads,
-        progress: r.progress,
+        progress: r.progress && !r.json,
         exe,
     };
     run(exemplar, out, &options)
@@ -175,6 +192,74 @@ pub fn run_batch(
         log::error!("{failed} of {} inputs failed", exemplars.len());
     }
     Ok(failed)
+}
+
+/// What `run` or `demo` works on.
+#[derive(Clone, Copy, Debug)]
+pub enum Exemplars<'a> {
+    /// Exemplar files: one into the output folder, several into one folder each ([`batch_of`]).
+    Files(&'a [PathBuf]),
+    /// The embedded demo exemplar, into the output folder.
+    Demo,
+}
+
+/// The `run` and `demo` commands: every exemplar run ([`run_batch`]), each
+/// told to `tell` as it finishes: its summary ([`SummaryText`]) or, with
+/// `r.json`, its record as a line of JSON; a failed one as its error (and,
+/// with `r.json`, its record too). Returns the exit status: 1 when any
+/// exemplar failed.
+pub fn run_command(exemplars: Exemplars, output: &Path, r: &RunRequest, mut tell: impl FnMut(&[Line])) -> Result<u8> {
+    let batch = match exemplars {
+        Exemplars::Files(meshes) => batch_of(meshes, output)?,
+        Exemplars::Demo => vec![(ExemplarSource::Demo, "(embedded)".to_string(), output.to_path_buf())],
+    };
+    let failed = run_batch(&batch, r, |name, out, outcome, seconds| {
+        let lines = match outcome {
+            Ok(summary) if r.json => vec![Line::Out(json_line(&RunRecord::done(name, out, summary)))],
+            Ok(summary) => vec![Line::Out(SummaryText { summary, out }.to_string())],
+            Err(e) if r.json => vec![Line::Error(e.to_string()), Line::Out(json_line(&RunRecord::failed(name, out, e.to_string(), seconds)))],
+            Err(e) => vec![Line::Error(e.to_string())],
+        };
+        tell(&lines);
+    })?;
+    Ok(super::command::exit_status(failed))
+}
+
+/// A record as one line of JSON Lines, newline included.
+fn json_line(record: &RunRecord) -> String {
+    // A record is plain data (strings, numbers, paths): it serialises.
+    serde_json::to_string(record).expect("a run record serialises") + "\n"
+}
+
+/// `run`'s summary of one exemplar run into `out`: where everything went,
+/// the stage times, the scores.
+pub struct SummaryText<'a> {
+    pub summary: &'a RunSummary,
+    pub out: &'a Path,
+}
+
+impl std::fmt::Display for SummaryText<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (summary, paths) = (self.summary, RunPaths::new(self.out));
+        writeln!(f, "\n{} -> {}", summary.source_name, self.out.display())?;
+        writeln!(f, "  exemplar levels  {}", paths.exemplar().display())?;
+        writeln!(f, "  models           {}", paths.models().display())?;
+        writeln!(f, "  variants         {} ({} folders, previews level_K.png)", paths.variants().display(), summary.variants)?;
+        if !summary.empty.is_empty() {
+            let names: Vec<String> = summary.empty.iter().map(|e| format!("{} (from level {})", e.name, e.first_empty)).collect();
+            writeln!(f, "  empty variants   {} of {}: {}", summary.empty.len(), summary.variants, names.join(", "))?;
+        }
+        writeln!(f, "  USD asset        {}", summary.usd_asset.display())?;
+        writeln!(f, "  metrics          {}", paths.eval_json().display())?;
+        writeln!(f, "  contact sheet    {}", paths.contact_sheet().display())?;
+        writeln!(f, "  report           {}", paths.report().display())?;
+        let stages: Vec<String> = summary.seconds.iter().map(|(k, v)| format!("{k} {v:.0} s")).collect();
+        writeln!(f, "  time             {}  (total {:.0} s)", stages.join(", "), summary.total_seconds)?;
+        match &summary.evaluation {
+            Some(e) => f.write_str(&e.table()),
+            None => writeln!(f, "  (no variant could be scored: see the warning above)"),
+        }
+    }
 }
 
 /// Encode, train, sample, mesh and evaluate `exemplar` into `out`, reusing
@@ -255,7 +340,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
         let _p = span(0.97, 0.98);
         super::run_usd(&paths, Some(o.n), config.output.meters_per_unit, config.output.usd_format)?
     };
-    log::info!("usd: {} ({} variant layers)", usd.asset.display(), usd.variants.len());
+    log::info!("usd: {usd}");
     stage("usd", t);
 
     let t = Instant::now();

@@ -398,6 +398,20 @@ pub struct SampleRequest<'a> {
     pub wait: bool,
 }
 
+/// `--extent X,Y,Z`: the per-axis scale of the level-0 box.
+#[derive(Clone, Copy, Debug)]
+pub struct Extent(pub [f32; 3]);
+
+/// Reads `--extent X,Y,Z`: three positive scales. The command line refuses
+/// anything else as bad usage (exit 2), before any work.
+pub fn parse_extent(text: &str) -> std::result::Result<Extent, String> {
+    match crate::level::edit::parse_vec3(text) {
+        Some(v) if v.iter().all(|e| e.is_finite() && *e > 0.0) => Ok(Extent(v)),
+        Some(_) => Err("each scale must be a positive number".into()),
+        None => Err("expected three numbers X,Y,Z (e.g. 2,1,1)".into()),
+    }
+}
+
 /// What `sample --json` prints: where the variants went and every file.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SampleRecord {
@@ -410,6 +424,13 @@ pub struct SampleRecord {
     pub seed: u64,
     pub seconds: f64,
     pub files: Vec<super::layout::OutputFile>,
+}
+
+/// `N variants -> OUTPUT`.
+impl std::fmt::Display for SampleRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} variants -> {}", self.variants, self.output.display())
+    }
 }
 
 /// The `sample` command: variants of the exemplar encoded in `dir` from its

@@ -217,3 +217,87 @@ pub fn write_loss_plot(models: &Path, k: usize, config: &Config) -> Result<()> {
         PhaseCurve { loss: &state.diffusion_loss, lr: diff_lr.as_deref() },
     )
 }
+
+/// What a user asks of the `train` command.
+pub struct TrainRequest<'a> {
+    /// The encoded exemplar's folder.
+    pub dir: &'a Path,
+    /// Where the models go (None: `DIR/models`).
+    pub models: Option<&'a Path>,
+    /// Train only this level.
+    pub level: Option<usize>,
+    pub resume: bool,
+    /// Levels trained at once (0: [`super::run::auto_jobs`]).
+    pub jobs: usize,
+    /// A shipped profile or a TOML file (None: [`super::run::DEFAULT_PROFILE`]).
+    pub profile: Option<&'a str>,
+    pub overrides: &'a [String],
+    pub device_spec: &'a str,
+    /// libtorch threads per process.
+    pub threads: i32,
+    pub progress: bool,
+    pub wait: bool,
+}
+
+/// What the `train` command did, and where the models are.
+pub struct TrainRecord {
+    pub models: std::path::PathBuf,
+    pub trained: Trained,
+}
+
+/// The `train` command: the configuration (a bad profile or `--set` is
+/// [`Error::Usage`]) and the device, then [`train_folder`]; child processes
+/// get the same profile, overrides and device.
+pub fn train_command(r: &TrainRequest) -> Result<TrainRecord> {
+    let profile = r.profile.unwrap_or(super::run::DEFAULT_PROFILE);
+    let config = Config::load(profile, r.overrides)?;
+    let device = super::run::device(r.device_spec)?;
+    let models = r.models.map_or_else(|| r.dir.join(super::layout::MODELS_DIR), Path::to_path_buf);
+    let exe = super::run::this_program()?;
+    let trained = train_folder(&TrainFolder {
+        exemplar_dir: r.dir,
+        models: &models,
+        config: &config,
+        device,
+        level: r.level,
+        resume: r.resume,
+        jobs: super::run::auto_jobs(r.jobs, device, r.threads),
+        child: TrainChild { exe: &exe, threads: r.threads, profile, device_spec: r.device_spec, overrides: r.overrides },
+        progress: r.progress,
+        wait: r.wait,
+    })?;
+    Ok(TrainRecord { models, trained })
+}
+
+/// What a training line tells besides the steps and the time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrainFigure {
+    /// The diffusion loss, first tenth -> last tenth: whether the level
+    /// learned (`train`, run by a person on one exemplar).
+    Loss,
+    /// Each network's steps per second: the figure GPU and cluster timings
+    /// are read from (`stage train`, one job of a cluster).
+    Speed,
+}
+
+/// One level's training as one line (no newline): its steps, `figure`, its
+/// time, and whether it must be resumed.
+pub fn training_line(r: &train::TrainReport, figure: TrainFigure) -> String {
+    let unfinished = if r.finished { "" } else { " (not finished: run again to resume)" };
+    let steps = format!("level {}: {} upsampler + {} diffusion steps", r.level, r.upsampler_steps, r.diffusion_steps);
+    match figure {
+        TrainFigure::Loss => format!("{steps}, loss {:.4} -> {:.4}, {:.0} s{unfinished}", r.diffusion_loss_start, r.diffusion_loss_end, r.seconds),
+        TrainFigure::Speed => {
+            format!("{steps}, {:.0} s ({:.1} + {:.1} steps/s){unfinished}", r.seconds, r.upsampler_it_per_s, r.diffusion_it_per_s)
+        }
+    }
+}
+
+impl std::fmt::Display for TrainRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.trained {
+            Trained::InProcesses { levels, jobs } => writeln!(f, "{} levels trained on {jobs} processes -> {}", levels.len(), self.models.display()),
+            Trained::InThisProcess(reports) => reports.iter().try_for_each(|r| writeln!(f, "{}", training_line(r, TrainFigure::Loss))),
+        }
+    }
+}

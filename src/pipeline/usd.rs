@@ -161,6 +161,40 @@ pub struct UsdOutcome {
     pub variants: Vec<VariantUsd>,
 }
 
+/// `ASSET (N variant layers)`: what `usd`, `stage usd` and `run`'s log say.
+impl std::fmt::Display for UsdOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} ({} variant layers)", self.asset.display(), self.variants.len())
+    }
+}
+
+/// What a user asks of the `usd` command.
+pub struct UsdRequest<'a> {
+    /// A run folder.
+    pub dir: &'a Path,
+    /// None: the run's `output.meters_per_unit`.
+    pub meters_per_unit: Option<f64>,
+    /// None: the run's `output.usd_format`.
+    pub format: Option<UsdFormat>,
+    /// Wait for another writer of the folder instead of refusing at once.
+    pub wait: bool,
+}
+
+/// The `usd` command: the USD asset of every variant folder of a run
+/// ([`run_usd`]). The folder must be a run (its configuration is read
+/// before its lock is taken, so nothing is made in a wrong folder); a
+/// meters-per-unit that is not a positive number is [`Error::Usage`].
+pub fn usd_command(r: &UsdRequest) -> Result<UsdOutcome> {
+    let paths = RunPaths::existing(r.dir)?;
+    let config = paths.read_config()?;
+    let _lock = crate::util::lock::lock(r.dir, crate::util::lock::Mode::Exclusive, r.wait, "usd")?;
+    let mpu = r.meters_per_unit.unwrap_or(config.output.meters_per_unit);
+    if !(mpu.is_finite() && mpu > 0.0) {
+        return Err(Error::Usage(format!("--meters-per-unit {mpu}: expected a positive number")));
+    }
+    run_usd(&paths, None, mpu, r.format.unwrap_or(config.output.usd_format))
+}
+
 /// The USD step over the finished variant folders in `dirs`: each one's
 /// `variant.usda` (reused when its levels, its mesh and `meters_per_unit`
 /// are those it was written from), then `root/variants.usda`.
