@@ -202,7 +202,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             // same as a given value, so the command line itself is asked.
             let given = std::env::var_os("SHAPESHIFTER_THREADS").is_some() || std::env::args().any(|a| a.starts_with("--threads"));
             let request = shapeshifter::studio::StudioRequest { dir: &dir, port, device_spec: &device, precision, wait };
-            pipeline::command::studio_command(&request, given, &mut |url| {
+            shapeshifter::studio::studio_command(&request, given, &mut |url| {
                 // On stdout, whatever the log level: a script reads the address.
                 println!("studio: {url}");
                 let _ = std::io::Write::flush(&mut std::io::stdout());

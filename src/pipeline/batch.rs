@@ -13,7 +13,6 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::command::Line;
 use crate::error::{Error, Result};
 
 /// The distinct output names of `inputs`, in order: the shortest trailing
@@ -83,9 +82,9 @@ impl<T> Report<T> {
         self.outcomes.iter().filter(|o| o.error.is_some()).count()
     }
 
-    /// 1 when any input failed ([`super::command::exit_status`]).
+    /// 1 when any input failed ([`exit_status`]).
     pub fn exit_status(&self) -> u8 {
-        super::command::exit_status(self.failed())
+        exit_status(self.failed())
     }
 
     /// `encode: 12 of 13 done, 1 failed, 8.3 s on 2 threads -> OUT`.
@@ -183,6 +182,23 @@ where
         Err(_) => inputs.iter().zip(names).map(one).collect(),
     };
     Report { outcomes, jobs, seconds: t0.elapsed().as_secs_f64() }
+}
+
+/// One piece of a command's human output, in the order it happens: text for
+/// stdout (printed as it is, newlines included), or one input's error for
+/// stderr (printed as `error: MESSAGE`, as every error line of the command
+/// line is). A batch's output interleaves the two, so it is a list of these
+/// rather than one text.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Line {
+    Out(String),
+    Error(String),
+}
+
+/// The exit status of a command whose inputs may fail one by one: 1 when
+/// any failed (the others were still done), else 0.
+pub fn exit_status(failed: usize) -> u8 {
+    u8::from(failed > 0)
 }
 
 #[cfg(test)]

@@ -1,30 +1,12 @@
 //! What the commands share: how a command's human output is handed to the
 //! command line ([`Line`]), and the commands too small for a stage module of
-//! their own (`info`, `studio`). Every command is one library function taking
+//! their own (`info`; `studio` is the studio's). Every command is one library function taking
 //! a request and returning a record; the binary parses, calls and prints.
 
 use std::path::PathBuf;
 
-use super::batch::{self, Report};
-use crate::error::Result;
+use super::batch::{self, Line, Report};
 use crate::io::info::{self, FileInfo};
-
-/// One piece of a command's human output, in the order it happens: text for
-/// stdout (printed as it is, newlines included), or one input's error for
-/// stderr (printed as `error: MESSAGE`, as every error line of the command
-/// line is). A batch's output interleaves the two, so it is a list of these
-/// rather than one text.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Line {
-    Out(String),
-    Error(String),
-}
-
-/// The exit status of a command whose inputs may fail one by one: 1 when
-/// any failed (the others were still done), else 0.
-pub fn exit_status(failed: usize) -> u8 {
-    u8::from(failed > 0)
-}
 
 /// The `info` command: every file described, `jobs` at a time (0: one per
 /// core), each failure its own one-line error.
@@ -47,16 +29,4 @@ impl Report<FileInfo> {
             })
             .collect()
     }
-}
-
-/// The `studio` command: the interactive page on a run folder until a stop
-/// signal, telling `on_url` the page's address once it serves.
-/// `threads_given`: whether the user chose the libtorch thread count; if
-/// not, the studio takes every core, since it runs one job at a time (the
-/// batch default of one thread suits processes that run side by side).
-pub fn studio_command(request: &crate::studio::StudioRequest, threads_given: bool, on_url: &mut dyn FnMut(&str)) -> Result<()> {
-    if !threads_given {
-        tch::set_num_threads(std::thread::available_parallelism().map_or(1, |n| n.get()) as i32);
-    }
-    crate::studio::run_studio(request, on_url)
 }

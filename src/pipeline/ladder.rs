@@ -188,7 +188,7 @@ impl LadderRecord {
         if self.outcome.checks.is_empty() {
             return Err(Error::file(&self.dir, "no check of the expected order could run (every rung skipped?)"));
         }
-        Ok(super::command::exit_status(self.outcome.failed().count()))
+        Ok(super::batch::exit_status(self.outcome.failed().count()))
     }
 }
 

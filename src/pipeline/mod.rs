@@ -34,7 +34,7 @@ pub mod train;
 pub mod usd;
 
 pub use children::{run_shards, train_in_processes};
-pub use command::Line;
+pub use batch::Line;
 pub use edit::edit_file;
 pub use encode::*;
 pub use evaluate::*;

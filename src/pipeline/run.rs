@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::eval::evaluate::Evaluation;
 use crate::learn::sample::SampleOptions;
 
-use super::command::Line;
+use super::batch::Line;
 use super::{ExemplarSource, RunPaths};
 
 /// What `run` needs besides the exemplar and the folder.
@@ -222,7 +222,7 @@ pub fn run_command(exemplars: Exemplars, output: &Path, r: &RunRequest, mut tell
         };
         tell(&lines);
     })?;
-    Ok(super::command::exit_status(failed))
+    Ok(super::batch::exit_status(failed))
 }
 
 /// A record as one line of JSON Lines, newline included.

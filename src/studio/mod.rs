@@ -393,3 +393,15 @@ pub fn run_studio(r: &StudioRequest, announce: &mut dyn FnMut(&str)) -> Result<(
     }
     Ok(())
 }
+
+/// The `studio` command: the interactive page on a run folder until a stop
+/// signal, telling `on_url` the page's address once it serves.
+/// `threads_given`: whether the user chose the libtorch thread count; if
+/// not, the studio takes every core, since it runs one job at a time (the
+/// batch default of one thread suits processes that run side by side).
+pub fn studio_command(request: &StudioRequest, threads_given: bool, on_url: &mut dyn FnMut(&str)) -> Result<()> {
+    if !threads_given {
+        tch::set_num_threads(std::thread::available_parallelism().map_or(1, |n| n.get()) as i32);
+    }
+    run_studio(request, on_url)
+}
