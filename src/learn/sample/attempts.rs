@@ -66,9 +66,13 @@ pub(super) fn attempt_seed(seed: u64, a: usize) -> u64 {
     }
 }
 
-/// Attempts of a variant in the exemplar's box that may be whole near copies
-/// before its later attempts are resized (with `resize_max`): one copy may
-/// be the seed's bad luck, as on the demo, whose next attempt is a tower of
-/// its own; two say the networks copy.
-pub const BOX_COPIES_BEFORE_RESIZE: usize = 2;
+/// Whole near copies in the exemplar's box after which a variant's later
+/// attempts are resized (with `resize_max`). One: on a Han house whose
+/// networks copy, a variant's resized passes were broken more often than
+/// not, so every attempt left for them counts (its copies 3 -> 2 of 10, one
+/// more longer house); on the demo three variants whose second attempt was
+/// a tower of its own became wider towers instead (still 10 of 10 whole and
+/// new); the ruined tower, which draws no copy, is unchanged bit for bit
+/// (docs/lab/single-buildings.md, "A Han house, and resizing after one copy").
+pub const BOX_COPIES_BEFORE_RESIZE: usize = 1;
 

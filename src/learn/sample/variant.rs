@@ -284,7 +284,7 @@ impl OneVariant<'_> {
             if p.resized.is_none() && p.bend.is_none() && rank.whole && !rank.new && self.resizes() {
                 self.box_copies.set(self.box_copies.get() + 1);
                 if self.box_copies.get() == BOX_COPIES_BEFORE_RESIZE {
-                    log::info!("{BOX_COPIES_BEFORE_RESIZE} attempts in the exemplar's box were whole near copies: the later ones resize");
+                    log::info!("whole near copies in the exemplar's box ({BOX_COPIES_BEFORE_RESIZE}): the later attempts resize");
                     self.copies_only.set(true);
                 }
             }
