@@ -556,9 +556,15 @@ const OPTIONAL_KEYS: &[(&str, &str)] = &[
 fn apply_override(table: &mut toml::Table, spec: &str) -> Result<()> {
     let bad = || Error::Invalid(format!("--set '{spec}': expected section.key=value"));
     let (path, value) = spec.split_once('=').ok_or_else(bad)?;
+    let value = value.trim();
+    let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(value.to_string()));
     let mut path = path.trim().to_string();
-    // A sampling key of the layout before the nesting: its new place.
-    if let Some(moved) = path.strip_prefix("sample.").and_then(crate::learn::sample::settings::moved_path) {
+    // A sampling key of the layout before the nesting: its new place
+    // (`sample.attempts` given a table is the new table itself).
+    if let Some(moved) = path.strip_prefix("sample.").and_then(crate::learn::sample::settings::moved_path).filter(|_| !parsed.is_table()) {
         log::warn!("--set {path}: now {moved}");
         path = moved;
     }
@@ -566,11 +572,6 @@ fn apply_override(table: &mut toml::Table, spec: &str) -> Result<()> {
     let (section, key) = path.rsplit_once('.').ok_or_else(bad)?;
     let (section, key) = (section.to_string(), key.to_string());
     let (section, key) = (section.as_str(), key.as_str());
-    let value = value.trim();
-    let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
-        .ok()
-        .and_then(|mut t| t.remove("v"))
-        .unwrap_or_else(|| toml::Value::String(value.to_string()));
     let mut sec = Some(&mut *table);
     for part in section.split('.') {
         sec = sec.and_then(|s| s.get_mut(part)).and_then(|s| s.as_table_mut());
@@ -694,6 +695,12 @@ mod tests {
         assert_eq!(paper.sample.proposers.resize_max, 0.0);
         let novel = |more: &str| vec!["sample.level0={candidates = 8, pick = \"novel\"}".to_string(), more.to_string()];
         assert_eq!(paper.with_overrides(&novel("sample.proposers.resize_max=1.75")).unwrap().sample.proposers.resize_max, 1.75);
+        // A whole table given: `sample.attempts` is the new table, not the old count.
+        let quick = Config::load("cpu", &["sample.level0={candidates = 1}".into(), "sample.attempts={count = 1}".into(), "sample.proposers={}".into()]).unwrap();
+        assert_eq!((quick.sample.level0.candidates, quick.sample.attempts.count, quick.sample.proposers.resize_max), (1, 1, 0.0));
+        assert!(!quick.sample.attempts.reject_copies && quick.sample.filters.mend_sheets, "the other tables are the profile's");
+        let old = Config::load("cpu", &["sample.attempts=2".into()]).unwrap();
+        assert_eq!(old.sample.attempts.count, 2, "the old name sets the count");
         let e = paper.with_overrides(&["sample.proposers.resize_max=1.75".into()]).unwrap_err().to_string();
         assert!(e.contains("novel"), "{e}");
         for bad in ["1.1", "5", "-1"] {

@@ -705,8 +705,9 @@ pub struct CheckResult {
 /// is the structure level itself, smoothing it changes the shape (walls two
 /// voxels thick melt; one iteration already reads as strong as eight), so
 /// the order of the two smoothing rungs and their "nothing broken at the
-/// structure level" are not expectations there, and are not checked
-/// ([`skipped_at_the_structure_level`] says so).
+/// structure level" are not expectations there, nor is the precision of
+/// shuffled colours (a 64^3 colour patch spans several stones), and they are
+/// not checked ([`skipped_at_the_structure_level`] says so).
 pub fn check(rows: &[VariantScores], colourful: bool, finer_than_structure: bool) -> Vec<CheckResult> {
     let get = |r: Rung| rows.iter().find(|v| v.name == r.name());
     let Some(top) = get(Rung::Exemplar) else { return Vec::new() };
@@ -720,6 +721,13 @@ pub fn check(rows: &[VariantScores], colourful: bool, finer_than_structure: bool
         // Positive = worse than the exemplar.
         let worse_by = |v: f64| if e.higher_is_better { ex - v } else { v - ex };
         for &r in e.worse {
+            // At 64^3 a colour patch spans several stones: shuffled colours
+            // still read as the exemplar's in most places (precision 0.962 ->
+            // 0.873 on the demo tower), while its F-score and coverage fall
+            // (0.963 -> 0.180).
+            if !finer_than_structure && r == Rung::ShuffledColours && e.metric == "colour.precision" {
+                continue;
+            }
             if let Some(row) = get(r) {
                 let v = (e.value)(row);
                 out.push(CheckResult {
@@ -752,7 +760,7 @@ pub fn check(rows: &[VariantScores], colourful: bool, finer_than_structure: bool
 
 /// What [`check`] leaves out where the finest level is the structure level.
 pub fn skipped_at_the_structure_level() -> &'static str {
-    "the smoothing rungs' order and their structure flags: the finest level is the structure level (64^3), where smoothing changes the shape, not its detail"
+    "the smoothing rungs' order and their structure flags, and shuffled colours' precision: the finest level is the structure level (64^3), where smoothing changes the shape, not its detail, and a colour patch spans several stones"
 }
 
 /// The flags each rung must (or must not) get: the structural rungs their
