@@ -32,6 +32,7 @@
 
 pub mod cloud;
 pub mod exemplar;
+pub mod settings;
 
 use std::time::Instant;
 

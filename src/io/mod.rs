@@ -19,5 +19,6 @@ pub mod poisson;
 pub(crate) mod mesh_check;
 pub(crate) mod obj;
 pub mod probe;
+pub mod settings;
 pub mod usd;
 pub mod vdb;

@@ -7,6 +7,7 @@
 pub mod checkpoint;
 pub mod grid;
 pub mod nn;
+pub mod settings;
 pub mod sample;
 pub mod schedule;
 pub mod noise;

@@ -18,6 +18,7 @@
 pub mod batch;
 pub mod children;
 pub mod cluster;
+pub mod cluster_settings;
 pub mod command;
 pub mod edit;
 pub mod encode;

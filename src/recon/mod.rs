@@ -35,6 +35,7 @@
 
 mod apss;
 pub mod bake;
+pub mod settings;
 mod contour;
 pub(crate) mod spatial;
 #[cfg(test)]
