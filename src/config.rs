@@ -109,32 +109,15 @@ impl Config {
             table.insert("transfer".into(), off);
         }
         // Settings not written at their defaults can still be set.
-        // The nested sampling tables, each with every key (so `--set` finds
-        // them), from a [sample] section in either layout.
-        if let Some(sample) = table.get_mut("sample").and_then(|s| s.as_table_mut()) {
-            let moved = crate::learn::sample::settings::migrate(sample);
-            if !moved.is_empty() {
-                log::warn!(
-                    "configuration: sample.{} written before [sample.level0], [sample.attempts], [sample.filters] and [sample.proposers]: read into those tables",
-                    moved.join(", sample.")
-                );
-            }
-            sample.entry("final_step").or_insert(toml::Value::String("prediction".into()));
-            let defaults = toml::Value::try_from(crate::learn::sample::settings::NestedDefaults::default()).expect("serialises");
-            for (name, value) in defaults.as_table().expect("a table") {
-                let sub = sample.entry(name.as_str()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
-                if let (Some(sub), Some(keys)) = (sub.as_table_mut(), value.as_table()) {
-                    for (k, v) in keys {
-                        sub.entry(k.as_str()).or_insert(v.clone());
-                    }
-                }
-            }
-        }
+        fill_sample_defaults(&mut table);
         if let Some(train) = table.get_mut("train").and_then(|s| s.as_table_mut()) {
             train.entry("bf16").or_insert(toml::Value::Boolean(false));
         }
         for o in overrides {
             apply_override(&mut table, o)?;
+            // A table given whole (`sample.level0={candidates = 1}`) has its
+            // other keys again, for the overrides after it.
+            fill_sample_defaults(&mut table);
         }
         let mut config: Config = toml::Value::Table(table)
             .try_into()
@@ -288,6 +271,32 @@ impl Config {
     }
 }
 
+
+/// A configuration's `[sample]` section in the nested layout
+/// ([`crate::learn::sample::settings::migrate`], warned once per key), each
+/// table with every key, so `--set` finds them whether or not the profile
+/// names them.
+fn fill_sample_defaults(table: &mut toml::Table) {
+    if let Some(sample) = table.get_mut("sample").and_then(|s| s.as_table_mut()) {
+        let moved = crate::learn::sample::settings::migrate(sample);
+        if !moved.is_empty() {
+            log::warn!(
+                "configuration: sample.{} written before [sample.level0], [sample.attempts], [sample.filters] and [sample.proposers]: read into those tables",
+                moved.join(", sample.")
+            );
+        }
+        sample.entry("final_step").or_insert(toml::Value::String("prediction".into()));
+        let defaults = toml::Value::try_from(crate::learn::sample::settings::NestedDefaults::default()).expect("serialises");
+        for (name, value) in defaults.as_table().expect("a table") {
+            let sub = sample.entry(name.as_str()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            if let (Some(sub), Some(keys)) = (sub.as_table_mut(), value.as_table()) {
+                for (k, v) in keys {
+                    sub.entry(k.as_str()).or_insert(v.clone());
+                }
+            }
+        }
+    }
+}
 
 fn digest_str(s: &str) -> String {
     crate::util::digest::short(s)
@@ -454,6 +463,9 @@ mod tests {
         let quick = Config::load("cpu", &["sample.level0={candidates = 1}".into(), "sample.attempts={count = 1}".into(), "sample.proposers={}".into()]).unwrap();
         assert_eq!((quick.sample.level0.candidates, quick.sample.attempts.count, quick.sample.proposers.resize_max), (1, 1, 0.0));
         assert!(!quick.sample.attempts.reject_copies && quick.sample.filters.mend_sheets, "the other tables are the profile's");
+        // A key set after its table was given whole.
+        let then = Config::load("cpu", &["sample.level0={candidates = 1}".into(), "sample.proposers={}".into(), "sample.level0.sampler=ddim".into()]).unwrap();
+        assert_eq!(then.sample.level0.sampler, Level0Sampler::Ddim);
         let old = Config::load("cpu", &["sample.attempts=2".into()]).unwrap();
         assert_eq!(old.sample.attempts.count, 2, "the old name sets the count");
         let e = paper.with_overrides(&["sample.proposers.resize_max=1.75".into()]).unwrap_err().to_string();
