@@ -440,11 +440,8 @@ impl Verdict {
     /// out-of-style patches against the exemplar's own level (`style`: a
     /// stretched wall's stones are not the exemplar's style, a longer wall
     /// of the same stones is). Its thin parts against the exemplar's own
-    /// count: stretching makes thin parts where there were none (the
-    /// Mauryan hall's 64^3 level, 1.28 times longer: 1.24 times the voxels,
-    /// 1.67 times the thin ones), and a part that appears once (a porch's
-    /// columns, an ear) does not grow with the box; a longer hall the networks
-    /// made whole read 0.55 against the stretched count, 0.92 against its own.
+    /// count ([`Structure::at_extent`]): a longer hall the networks made
+    /// whole read 0.55 against the stretched count, 0.92 against its own.
     pub fn at_extent(
         shape_level: &Level,
         s: &Structure,
@@ -452,7 +449,7 @@ impl Verdict {
         style: (&Level, &Structure),
         p: &Thresholds,
     ) -> Self {
-        let reference = Structure { thin: style.1.thin, ..at_extent.1.clone() };
+        let reference = Structure::at_extent(at_extent.1, style.1);
         Self::with_pose(shape_level, s, at_extent.0, &reference, (style.0, at_extent.1), p)
     }
 }

@@ -90,12 +90,11 @@ impl AtExtent {
         let box0 = level0_box(level0, extent.extent)?;
         let level0 = extent.of(levels, 0)?;
         let mut structure0 = Structure::of(&level0);
-        structure0.sheet_axis = sheet_axis0;
-        // Thin parts against the exemplar's own count, as at the structure
-        // level (`Verdict::at_extent`: stretching makes thin parts).
         if !extent.is_same() {
-            structure0.thin = Structure::of(&levels[0]).thin;
+            // The level-0 gate judges as the structure level does.
+            structure0 = Structure::at_extent(&structure0, &Structure::of(&levels[0]));
         }
+        structure0.sheet_axis = sheet_axis0;
         if continuing {
             return Ok(AtExtent { extent, box0, level0, structure0, thin1: None, reference: None });
         }
