@@ -1,7 +1,9 @@
 //! The level-0 gate: of the level-0 shapes drawn for a pass, which is kept.
 //! A candidate passes when its structure score against the exemplar's
 //! level 0 reaches `level0_min_structure` and it lost no part; the `novel`
-//! pick keeps the first new enough, else the least like the exemplar.
+//! pick keeps the first new enough, else the least like the exemplar; in a
+//! resized box, the first like enough to the exemplar at that extent, else
+//! the likest.
 
 use crate::judge::{Flag, Structure, Thresholds, Verdict};
 use crate::level::Level;
@@ -15,6 +17,18 @@ use crate::util::seed::{derive_seed, Stream};
 /// full reverse process at level 0).
 pub const NEW_ENOUGH_LEVEL0_FSCORE: f64 = 0.985;
 
+/// In a resized box, a passing level-0 candidate whose F-score against the
+/// exemplar's level 0 at that extent reaches this ends the draws: like
+/// enough, the exemplar at that size. Otherwise all the candidates are drawn
+/// ([`super::proposers::RESIZED_CANDIDATES`]) and the likest kept. The box's
+/// size is what is new there; a start that differs from the exemplar at its
+/// extent has lost a part the finer levels do not grow back. Measured at
+/// 16^3 (`examples/level0_at_extent.rs`, docs/lab/single-buildings.md): the
+/// first passing starts the Han house and the Mauryan hall kept when they
+/// lost the rear hall and the front vault read 0.957 and 0.984; the starts
+/// of whole longer buildings 0.978-1.000 (the temple's ten 1.000).
+pub const LIKE_ENOUGH_AT_EXTENT_FSCORE: f64 = 0.995;
+
 /// Why the level-0 pick kept the candidate it kept.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum Kept {
@@ -26,8 +40,28 @@ pub(super) enum Kept {
     /// `novel`: none new enough; of those that passed, the least like the
     /// exemplar (lowest F-score, then the largest changed region).
     LeastLike { fscore: f64, change: f64 },
+    /// In a resized box: the first that passed with an F-score of
+    /// [`LIKE_ENOUGH_AT_EXTENT_FSCORE`] or more against the exemplar at
+    /// the box's extent.
+    LikeEnough { fscore: f64, change: f64 },
+    /// In a resized box, none like enough: of those that passed, the likest
+    /// (highest F-score, then the smallest changed region).
+    Likest { fscore: f64, change: f64 },
     /// None passed: the best scoring.
     BestScoring { score: f64, fscore: f64 },
+}
+
+/// How the pick chooses among the candidates that pass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Policy {
+    /// The first (`sample.level0.pick = "first"`).
+    First,
+    /// The first new enough, else the least like the exemplar
+    /// (`"novel"`).
+    Novel,
+    /// In a resized box: the first like enough to the exemplar at the box's
+    /// extent, else the likest.
+    Likest,
 }
 
 /// What an offered candidate means for the pick.
@@ -53,19 +87,29 @@ pub(super) struct Offer {
 /// "new" too, F 0.97, and no finer level regrows the ear; docs/lab/new-shapes.md,
 /// "New shapes" and "Thin parts at level 0").
 pub(super) struct Level0Pick {
-    pub(super) novel: bool,
+    pub(super) policy: Policy,
     pub(super) min_structure: f64,
     /// (score, k, F-score against the exemplar) of the best scoring.
     pub(super) best: Option<(f64, usize, f64)>,
-    /// ((F-score, -change), k) of the least like the exemplar that passed.
-    pub(super) newest: Option<((f64, f64), usize)>,
+    /// ((F-score, change), k) of the one that passed that the policy ranks
+    /// first so far: the least like the exemplar (`Novel`), the likest
+    /// (`Likest`).
+    pub(super) ranked: Option<((f64, f64), usize)>,
     /// The `first` pick's candidate, once one passed.
     pub(super) first: Option<usize>,
 }
 
 impl Level0Pick {
     pub(super) fn new(pick: crate::config::Level0Pick, min_structure: f64) -> Self {
-        Level0Pick { novel: pick == crate::config::Level0Pick::Novel, min_structure, best: None, newest: None, first: None }
+        let policy = match pick {
+            crate::config::Level0Pick::First => Policy::First,
+            crate::config::Level0Pick::Novel => Policy::Novel,
+        };
+        Self::with_policy(policy, min_structure)
+    }
+
+    pub(super) fn with_policy(policy: Policy, min_structure: f64) -> Self {
+        Level0Pick { policy, min_structure, best: None, ranked: None, first: None }
     }
 
     pub(super) fn passes(&self, score: f64, part_lost: bool) -> bool {
@@ -82,19 +126,34 @@ impl Level0Pick {
             self.best = Some((score, k, likeness.0));
             offer.best = true;
         }
-        if pass && self.novel {
-            let (fscore, change) = likeness;
-            // Lower is less like the exemplar.
-            let key = (fscore, -change);
-            if self.newest.is_none_or(|(n, _)| key < n) {
-                self.newest = Some((key, k));
+        if !pass {
+            return offer;
+        }
+        let fscore = likeness.0;
+        // Whether `a` ranks before `b` under the policy.
+        let before = |a: (f64, f64), b: (f64, f64)| match self.policy {
+            // Less like the exemplar: a lower F-score, then a larger change.
+            Policy::Novel => (a.0, -a.1) < (b.0, -b.1),
+            // Likelier: a higher F-score, then a smaller change.
+            Policy::Likest => (-a.0, a.1) < (-b.0, b.1),
+            Policy::First => false,
+        };
+        match self.policy {
+            Policy::First => {
+                self.first = Some(k);
                 offer.picked = true;
+                offer.stop = true;
             }
-            offer.stop = fscore < NEW_ENOUGH_LEVEL0_FSCORE;
-        } else if pass {
-            self.first = Some(k);
-            offer.picked = true;
-            offer.stop = true;
+            Policy::Novel | Policy::Likest => {
+                if self.ranked.is_none_or(|(r, _)| before(likeness, r)) {
+                    self.ranked = Some((likeness, k));
+                    offer.picked = true;
+                }
+                offer.stop = match self.policy {
+                    Policy::Novel => fscore < NEW_ENOUGH_LEVEL0_FSCORE,
+                    _ => fscore >= LIKE_ENOUGH_AT_EXTENT_FSCORE,
+                };
+            }
         }
         offer
     }
@@ -104,9 +163,14 @@ impl Level0Pick {
         if let Some(k) = self.first {
             return Some((k, Kept::First));
         }
-        if let Some(((fscore, change), k)) = self.newest {
-            let change = -change;
-            return Some((k, if fscore < NEW_ENOUGH_LEVEL0_FSCORE { Kept::NewEnough { fscore, change } } else { Kept::LeastLike { fscore, change } }));
+        if let Some(((fscore, change), k)) = self.ranked {
+            let why = match self.policy {
+                Policy::Likest if fscore >= LIKE_ENOUGH_AT_EXTENT_FSCORE => Kept::LikeEnough { fscore, change },
+                Policy::Likest => Kept::Likest { fscore, change },
+                _ if fscore < NEW_ENOUGH_LEVEL0_FSCORE => Kept::NewEnough { fscore, change },
+                _ => Kept::LeastLike { fscore, change },
+            };
+            return Some((k, why));
         }
         self.best.map(|(score, k, fscore)| (k, Kept::BestScoring { score, fscore }))
     }

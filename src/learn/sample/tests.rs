@@ -38,7 +38,10 @@ fn a_whole_copy_is_passed_over_for_a_whole_new_shape_but_kept_before_a_broken_on
 /// Offers (score, part lost, F-score, change) in turn until the pick
 /// stops; the candidates drawn and what was kept.
 fn run_pick(pick: Pick, min: f64, candidates: &[(f64, bool, f64, f64)]) -> (usize, Option<(usize, Kept)>) {
-    let mut p = Level0Pick::new(pick, min);
+    run_policy(Level0Pick::new(pick, min), candidates)
+}
+
+fn run_policy(mut p: Level0Pick, candidates: &[(f64, bool, f64, f64)]) -> (usize, Option<(usize, Kept)>) {
     let mut drawn = 0;
     for (k, &(score, part_lost, f, change)) in candidates.iter().enumerate() {
         drawn += 1;
@@ -69,6 +72,25 @@ fn the_novel_pick_stops_at_the_first_new_enough_and_never_keeps_a_shape_cut_shor
     // (the lower F-score; on a tie, the larger change).
     let c = [(0.81, true, 0.9, 0.1), (0.9, false, 0.99, 0.01), (0.9, false, 0.988, 0.01), (0.9, false, 0.988, 0.02)];
     assert_eq!(run_pick(Pick::Novel, 0.8, &c), (4, Some((3, Kept::LeastLike { fscore: 0.988, change: 0.02 }))));
+}
+
+#[test]
+fn in_a_resized_box_the_pick_keeps_the_first_like_enough_else_the_likest_never_a_shape_cut_short() {
+    let likest = || Level0Pick::with_policy(Policy::Likest, 0.8);
+    // 0: the likest of all but cut short; 1: a house that lost its rear
+    // hall (F 0.957); 2: like enough, ends the draws; 3: never drawn.
+    let c = [(0.9, true, 1.0, 0.0), (0.88, false, 0.957, 0.077), (0.95, false, 0.996, 0.004), (0.99, false, 1.0, 0.0)];
+    assert_eq!(run_policy(likest(), &c), (3, Some((2, Kept::LikeEnough { fscore: 0.996, change: 0.004 }))));
+    // None like enough: every candidate is drawn and the likest of those
+    // that pass is kept (the higher F-score; on a tie, the smaller change),
+    // not the first that passed, as the `first` pick would.
+    let c = [(0.9, false, 0.957, 0.077), (0.9, false, 0.99, 0.02), (0.9, false, 0.99, 0.01), (0.7, false, 0.994, 0.0)];
+    assert!(c.iter().all(|&(_, _, f, _)| f < LIKE_ENOUGH_AT_EXTENT_FSCORE));
+    assert_eq!(run_policy(likest(), &c), (4, Some((2, Kept::Likest { fscore: 0.99, change: 0.01 }))));
+    assert_eq!(run_pick(Pick::First, 0.8, &c), (1, Some((0, Kept::First))));
+    // Nothing passes: the best scoring, as for the other picks.
+    let c = [(0.5, false, 0.9, 0.1), (0.7, true, 0.99, 0.0)];
+    assert_eq!(run_policy(likest(), &c), (2, Some((1, Kept::BestScoring { score: 0.7, fscore: 0.99 }))));
 }
 
 /// A bunny at `res`^3 made of spheres: a body (radius 0.5) with two ears

@@ -19,7 +19,7 @@ use crate::level::warp::Bend;
 use crate::util::seed::{derive_seed, Stream};
 
 use super::attempts::{attempt_seed, keep_attempt, AttemptRank, BOX_COPIES_BEFORE_RESIZE};
-use super::gate::{candidate_seed, level0_gate, Kept, Level0Pick};
+use super::gate::{candidate_seed, level0_gate, Kept, Level0Pick, Policy};
 use super::models::Models;
 use super::options::{LevelSink, SampleOptions, SampledVariant};
 use super::proposers::{could_bend, AtExtent, Bending, Start, RESIZED_CANDIDATES, RESIZE_TRIES};
@@ -110,8 +110,7 @@ impl OneVariant<'_> {
         let params = Thresholds::default();
         let resized = !self.at.extent.is_same();
         let candidates = if resized { opts.level0_candidates.clamp(1, RESIZED_CANDIDATES) } else { opts.level0_candidates.max(1) };
-        let policy = if resized { crate::config::Level0Pick::First } else { opts.level0_pick };
-        let mut pick = Level0Pick::new(policy, opts.level0_min_structure);
+        let mut pick = if resized { Level0Pick::with_policy(Policy::Likest, opts.level0_min_structure) } else { Level0Pick::new(opts.level0_pick, opts.level0_min_structure) };
         // The candidates the pick may still keep: the best scoring (the
         // fallback) and its pick so far.
         let mut best: Option<(SparseTensor, Level)> = None;
@@ -132,7 +131,7 @@ impl OneVariant<'_> {
                 }
             }
             let offer = pick.offer(k, score, part_lost, likeness);
-            log::debug!("level 0 candidate {k}: structure {score:.3}{}", if part_lost { ", a part lost" } else { "" });
+            log::debug!("level 0 candidate {k}: structure {score:.3}, F {:.3}, change {:.3}{}", likeness.0, likeness.1, if part_lost { ", a part lost" } else { "" });
             if offer.picked {
                 picked = Some((x.with_feats(x.feats.shallow_clone())?, level.clone()));
             }
@@ -144,7 +143,7 @@ impl OneVariant<'_> {
             }
         }
         let (k, why) = pick.kept().expect("at least one candidate");
-        if !matches!(why, Kept::First | Kept::NewEnough { .. }) {
+        if matches!(why, Kept::LeastLike { .. } | Kept::BestScoring { .. }) {
             if let Bending::Bends(voxels) = self.bending {
                 let bend = Bend { seed: derive_seed(seed, 0, Stream::Bend, 0), voxels: voxels as f32 };
                 log::info!("level 0: none of {candidates} candidates new enough: the exemplar bent instead (seed {})", bend.seed);
@@ -171,6 +170,10 @@ impl OneVariant<'_> {
             Kept::NewEnough { fscore, change } | Kept::LeastLike { fscore, change } => {
                 let how = if matches!(why, Kept::NewEnough { .. }) { "new enough" } else { "the least like the exemplar of all" };
                 log::info!("level 0: candidate {k} of {candidates} kept, {how} (F {fscore:.3}, change {change:.3} against the exemplar's level 0)");
+            }
+            Kept::LikeEnough { fscore, change } | Kept::Likest { fscore, change } => {
+                let how = if matches!(why, Kept::LikeEnough { .. }) { "like enough" } else { "the likest of all" };
+                log::info!("level 0: candidate {k} of {candidates} kept, {how} (F {fscore:.3}, change {change:.3} against the exemplar's level 0 at extent {})", self.at.extent);
             }
             Kept::BestScoring { score, .. } => log::warn!(
                 "level 0: none of {candidates} candidates passed (structure {:.2}, not cut short): the best ({score:.3}) is kept",
