@@ -154,9 +154,9 @@ pub(super) fn could_bend(opts: &SampleOptions) -> bool {
 /// longer box, where a house's and a temple's filled most.
 pub const RESIZE_TRIES: usize = 6;
 
-/// Level-0 candidates drawn at most in a resized box (the first that passes
-/// is kept): on the house and the temple one of the first 12 passed every
-/// time one did.
+/// Level-0 candidates drawn at most in a resized box (the first like enough
+/// to the exemplar at that extent is kept, else the likest that passes): on
+/// the house and the temple one of the first 12 passed every time one did.
 pub const RESIZED_CANDIDATES: usize = 12;
 
 /// How a pass starts: a level-0 shape drawn by the network (its pruned

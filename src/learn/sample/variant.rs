@@ -97,9 +97,11 @@ impl OneVariant<'_> {
     ///
     /// Where none is new enough and the exemplar is not bent, with
     /// `resize_max`, the pass is resized instead ([`Start::Resized`]), and so
-    /// at once are the variant's later attempts. A resized box keeps the
-    /// first candidate that passes against the exemplar at its extent: the
-    /// size is what is new.
+    /// at once are the variant's later attempts. A resized box keeps, of
+    /// the candidates that pass against the exemplar at its extent, the first
+    /// like enough to it ([`super::gate::LIKE_ENOUGH_AT_EXTENT_FSCORE`]),
+    /// else the likest: the size is what is new, and a start unlike the
+    /// exemplar at that size has lost a part.
     fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<Start> {
         if self.resizes() && self.copies_only.get() {
             if let Some(extent) = self.drawn_extent(seed, opts) {
