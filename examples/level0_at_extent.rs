@@ -1,7 +1,8 @@
 //! A probe: each resized variant's level 0 judged as the level-0 gate
 //! judges a candidate, against the exemplar's level 0 stretched to the
 //! variant's extent (thin parts at the exemplar's own count): the verdict's
-//! figures, one line per variant.
+//! figures, one line per variant. `LEVEL` another level (the structure
+//! level: 2); `STRETCHED=DIR` writes the exemplar at each variant's extent.
 //!
 //! `cargo run --release --example level0_at_extent -- EXEMPLAR_DIR VARIANT_DIR...`
 
@@ -19,6 +20,13 @@ fn main() -> anyhow::Result<()> {
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
             .and_then(|j| serde_json::from_value::<[f32; 3]>(j["extent"].clone()).ok()) else { continue };
         let at = shapeshifter::level::resize::stretched(&ex0, &ex, e)?;
+        // STRETCHED=DIR: the exemplar's level at this variant's extent, to
+        // read with the other probes (`seen_through_views`).
+        if let Some(dir) = std::env::var_os("STRETCHED") {
+            let out = Path::new(&dir).join(Path::new(d).file_name().unwrap_or_default());
+            std::fs::create_dir_all(&out)?;
+            shapeshifter::io::vdb::write_level(&out.join(format!("level_{l}.vdb")), &at, &Default::default(), Default::default())?;
+        }
         let s_at = Structure::at_extent(&Structure::of(&at), &Structure::of(&ex));
         let v = read(d, l)?;
         let r = Verdict::new(&v, &Structure::of(&v), &at, &s_at, &Thresholds::default());

@@ -200,6 +200,9 @@ pub struct EncodeStats {
     /// (resolution, active voxels) for every resolution from coarsest up to sampling,
     /// coarsest first (intermediate resolutions that are not output included).
     pub voxels_per_resolution: Vec<(u32, usize)>,
+    /// Whether the mesh's normals pointed inward and were turned
+    /// ([`orientation::face_outward`]).
+    pub normals_turned: bool,
 }
 
 impl EncodeStats {
@@ -305,7 +308,21 @@ pub fn encode(mesh: &Mesh, options: &EncodeOptions) -> Result<(Vec<Level>, Encod
     let samples = sample_voxels(&prep, &pairs, &groups, rs, &colours);
     drop((pairs, groups));
     stats.sample_s = t.elapsed().as_secs_f64();
-    let levels = pool_levels(&samples, options, frame, &mut stats);
+    let mut levels = pool_levels(&samples, options, frame, &mut stats);
+    // Triangles wound inward give normals into the shape (many exported
+    // game assets): turned here, once, for every stage after.
+    if let Some((share, turned)) = orientation::face_outward(&mut levels) {
+        if turned {
+            log::info!(
+                "'{}': its triangles are wound inward ({:.0}% of the surface seen from outside faces the eye): every normal turned outward",
+                mesh.name,
+                100.0 * share
+            );
+        } else {
+            log::debug!("'{}': {:.0}% of the surface seen from outside faces the eye", mesh.name, 100.0 * share);
+        }
+        stats.normals_turned = turned;
+    }
     stats.total_s = start.elapsed().as_secs_f64();
     log::debug!(
         "encoded '{}': {} pairs, {} sampling voxels, {:?} in {:.3} s",
@@ -408,6 +425,7 @@ fn pool_all<G: PointRule>(
 
 mod morton;
 use morton::*;
+pub mod orientation;
 mod normalise;
 use normalise::*;
 mod voxelise;
