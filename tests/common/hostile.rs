@@ -212,40 +212,50 @@ pub fn builtin_seeds(scratch: &Path) -> Vec<Seed> {
     )
     .expect("seed level writes");
     seeds.push(level_seed(std::fs::read(&level_path).expect("seed level reads back")));
-    seeds.push(bend_seed(&sphere, scratch));
+    seeds.extend(record_seeds(&sphere, scratch));
     seeds
 }
 
-/// A bent variant's record (`bend.json`) beside an exemplar and a variant
-/// (the exemplar's own levels) for `eval`, which reads it and bends the
-/// exemplar again: the mutations hit the record only.
-pub fn bend_seed(sphere: &shapeshifter::io::mesh::Mesh, scratch: &Path) -> Seed {
+/// A variant's records beside an exemplar and a variant (the exemplar's own
+/// levels) for `eval`, which reads each and makes the exemplar again as the
+/// variant's start was: bent (`bend.json`), or stretched to a resized box
+/// (`extent.json`). The mutations hit the record only.
+pub fn record_seeds(sphere: &shapeshifter::io::mesh::Mesh, scratch: &Path) -> Vec<Seed> {
     let config = shapeshifter::config::Config::load(
         "cpu",
         &["encode.coarsest_resolution=16".into(), "encode.finest_resolution=64".into(), "encode.sampling_resolution=128".into()],
     )
     .expect("seed config");
-    let ex = scratch.join("bend_exemplar");
+    let ex = scratch.join("record_exemplar");
     let exemplar = shapeshifter::io::exemplar::Exemplar::Mesh(sphere.clone());
     shapeshifter::pipeline::encode_stage(&exemplar, "sphere", "0", &config, &ex).expect("seed exemplar encodes");
-    let mut files: Vec<(String, Vec<u8>)> = vec![(
-        format!("variant_000/{}", shapeshifter::level::warp::BEND_FILE),
-        serde_json::to_vec(&shapeshifter::level::warp::Bend { seed: 7, voxels: 2.0 }).expect("bend serialises"),
-    )];
-    for entry in std::fs::read_dir(&ex).expect("seed exemplar lists").flatten() {
-        let name = entry.file_name().to_string_lossy().into_owned();
-        let bytes = std::fs::read(entry.path()).expect("seed exemplar reads");
-        if name.starts_with("level_") && name.ends_with(".vdb") && !name.contains("points") {
-            files.push((format!("variant_000/{name}"), bytes.clone()));
-        }
-        files.push((format!("exemplar/{name}"), bytes));
-    }
-    Seed {
-        format: "bend.json".into(),
-        files,
-        mutable: vec![0],
-        commands: vec![args(&["eval", "{indir}/exemplar", "{indir}/variant_000", "-o", "{out}/eval.json"])],
-    }
+    let records = [
+        (shapeshifter::level::warp::BEND_FILE, serde_json::to_vec(&shapeshifter::level::warp::Bend { seed: 7, voxels: 2.0 }).expect("bend serialises")),
+        (
+            shapeshifter::level::resize::EXTENT_FILE,
+            serde_json::to_vec(&shapeshifter::level::resize::Extent { extent: [1.25, 1.0, 1.0] }).expect("extent serialises"),
+        ),
+    ];
+    records
+        .into_iter()
+        .map(|(record, bytes)| {
+            let mut files: Vec<(String, Vec<u8>)> = vec![(format!("variant_000/{record}"), bytes)];
+            for entry in std::fs::read_dir(&ex).expect("seed exemplar lists").flatten() {
+                let name = entry.file_name().to_string_lossy().into_owned();
+                let bytes = std::fs::read(entry.path()).expect("seed exemplar reads");
+                if name.starts_with("level_") && name.ends_with(".vdb") && !name.contains("points") {
+                    files.push((format!("variant_000/{name}"), bytes.clone()));
+                }
+                files.push((format!("exemplar/{name}"), bytes));
+            }
+            Seed {
+                format: record.into(),
+                files,
+                mutable: vec![0],
+                commands: vec![args(&["eval", "{indir}/exemplar", "{indir}/variant_000", "-o", "{out}/eval.json"])],
+            }
+        })
+        .collect()
 }
 
 /// The level-file commands: every reader path of a level file.
