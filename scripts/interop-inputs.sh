@@ -8,21 +8,13 @@ set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BIN=$ROOT/target/release/shapeshifter
 WORK=$1
-CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
-VENV="$CACHE/clouds-venv"
 # Open3D's wheel links libusb-1.0 (its Kinect reader) and fails to import without it.
 if ! dpkg-query -W -f='${Status}' libusb-1.0-0 2>/dev/null | grep -q "install ok installed"; then
   echo "interop-inputs: installing libusb-1.0-0 (Open3D needs it)" >&2
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
   $SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q libusb-1.0-0 > /dev/null
 fi
-if [ ! -f "$VENV/.complete" ]; then
-  echo "interop-inputs: installing Open3D, laspy, lazrs and pye57 into $VENV" >&2
-  rm -rf "$VENV"
-  /usr/bin/python3 -m venv "$VENV"
-  "$VENV/bin/pip" install -q "laspy[lazrs]==2.5.4" "pye57==0.4.13" "open3d==0.18.0" numpy
-  touch "$VENV/.complete"
-fi
+VENV=$(bash "$ROOT/scripts/venv.sh" clouds-venv "laspy[lazrs]==2.5.4" "pye57==0.4.13" "open3d==0.18.0" numpy)
 
 # The demo exemplar's 32^3 level as oriented coloured points, and the mesh
 # exported by Blender as GLB.

@@ -26,8 +26,6 @@ DEPTH=${DEPTH:-}          # ours: --depth N; empty: the default (8)
 OPEN3D_DEPTH=${OPEN3D_DEPTH:-9}
 OUT=${OUT:-out/poisson-vs-open3d}
 TOWER=${TOWER:-../shared/data/towerruins/towerruins.obj}
-CACHE="${SHAPESHIFTER_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/shapeshifter}"
-VENV="$CACHE/open3d-venv"
 BIN="$ROOT/target/release/shapeshifter"
 FIDELITY="$ROOT/target/release/examples/mesh_fidelity"
 
@@ -37,13 +35,7 @@ if ! dpkg-query -W -f='${Status}' libusb-1.0-0 2>/dev/null | grep -q "install ok
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO=sudo
   $SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q libusb-1.0-0
 fi
-if [ ! -f "$VENV/.complete" ]; then
-  echo "poisson-vs-open3d: installing Open3D 0.20.0 into $VENV" >&2
-  rm -rf "$VENV"
-  /usr/bin/python3 -m venv "$VENV"
-  "$VENV/bin/pip" install -q open3d==0.20.0
-  touch "$VENV/.complete"
-fi
+VENV=$(bash "$ROOT/scripts/venv.sh" open3d-venv open3d==0.20.0)
 
 cargo build --release -q
 cargo build --release -q --example mesh_fidelity --example demo_exemplar
