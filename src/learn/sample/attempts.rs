@@ -76,3 +76,12 @@ pub(super) fn attempt_seed(seed: u64, a: usize) -> u64 {
 /// (docs/lab/single-buildings.md, "A Han house, and resizing after one copy").
 pub const BOX_COPIES_BEFORE_RESIZE: usize = 1;
 
+
+/// Passes in the exemplar's box that were not whole and new (copies or
+/// broken) after which a variant's later attempts are resized (with
+/// `resize_max`). A single building whose networks, trained with its normals
+/// facing out, break it in its own box (a Han house: 8 of 10 variants broken
+/// in all six attempts, their level 0s not quite the exemplar's, so never
+/// resized) gets longer boxes after two; a ruin whose networks make new
+/// shapes in its box seldom misses twice.
+pub const BOX_MISSES_BEFORE_RESIZE: usize = 2;

@@ -79,7 +79,7 @@ mod variant;
 #[cfg(test)]
 mod tests;
 
-pub use attempts::{keep_attempt, AttemptRank, BOX_COPIES_BEFORE_RESIZE};
+pub use attempts::{keep_attempt, AttemptRank, BOX_COPIES_BEFORE_RESIZE, BOX_MISSES_BEFORE_RESIZE};
 pub use gate::NEW_ENOUGH_LEVEL0_FSCORE;
 pub use models::{load_models, untrained_models, Models};
 pub use options::{LevelSink, SampleOptions, SampledVariant};
@@ -149,7 +149,7 @@ pub fn sample_observed(
     };
     let copies_only = std::cell::Cell::new(false);
     let resized_whole = std::cell::Cell::new(false);
-    let box_copies = std::cell::Cell::new(0);
+    let box_misses = std::cell::Cell::new((0, 0));
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
     // The proposers start a pass in the exemplar's box: with a box asked for
     // (`--extent`) or a level to continue from, they are off, and said so.
@@ -166,7 +166,7 @@ pub fn sample_observed(
             .map(|i| {
                 copies_only.set(false);
                 resized_whole.set(false);
-                box_copies.set(0);
+                box_misses.set((0, 0));
                 let job = OneVariant {
                     models,
                     exemplar_levels,
@@ -181,7 +181,7 @@ pub fn sample_observed(
                     bending,
                     copies_only: &copies_only,
                     resized_whole: &resized_whole,
-                    box_copies: &box_copies,
+                    box_misses: &box_misses,
                     resizing,
                     told: sink.map(|f| (i, f)),
                 };

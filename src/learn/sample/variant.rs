@@ -18,7 +18,7 @@ use crate::level::resize::Extent;
 use crate::level::warp::Bend;
 use crate::util::seed::{derive_seed, Stream};
 
-use super::attempts::{attempt_seed, keep_attempt, AttemptRank, BOX_COPIES_BEFORE_RESIZE};
+use super::attempts::{attempt_seed, keep_attempt, AttemptRank, BOX_COPIES_BEFORE_RESIZE, BOX_MISSES_BEFORE_RESIZE};
 use super::gate::{candidate_seed, level0_gate, Kept, Level0Pick, Policy};
 use super::models::Models;
 use super::options::{LevelSink, SampleOptions, SampledVariant};
@@ -55,8 +55,10 @@ pub(super) struct OneVariant<'a> {
     /// shape).
     pub(super) resized_whole: &'a std::cell::Cell<bool>,
     /// Attempts of this variant in the exemplar's box that were whole near
-    /// copies: at [`BOX_COPIES_BEFORE_RESIZE`] its later attempts resize.
-    pub(super) box_copies: &'a std::cell::Cell<usize>,
+    /// copies, and that were not whole and new (copies or broken): at
+    /// [`BOX_COPIES_BEFORE_RESIZE`] or [`BOX_MISSES_BEFORE_RESIZE`] its later
+    /// attempts resize.
+    pub(super) box_misses: &'a std::cell::Cell<(usize, usize)>,
     /// Whether a pass whose level-0 candidates are none new enough is
     /// resized (`resize_max`, not bent, the novel pick in the exemplar's box).
     pub(super) resizing: bool,
@@ -285,11 +287,18 @@ impl OneVariant<'_> {
             };
             // Whole copies in the exemplar's box, though level 0 looked new
             // enough (a house whose copies differ in a hidden courtyard
-            // floor): the networks copy, and later attempts resize.
-            if p.resized.is_none() && p.bend.is_none() && rank.whole && !rank.new && self.resizes() {
-                self.box_copies.set(self.box_copies.get() + 1);
-                if self.box_copies.get() == BOX_COPIES_BEFORE_RESIZE {
+            // floor), or passes there that are copies or broken: the
+            // networks offer nothing whole and new in that box, and later
+            // attempts resize.
+            if p.resized.is_none() && p.bend.is_none() && !(rank.whole && rank.new) && self.resizes() && !self.copies_only.get() {
+                let (copies, misses) = self.box_misses.get();
+                let (copies, misses) = (copies + (rank.whole as usize), misses + 1);
+                self.box_misses.set((copies, misses));
+                if copies == BOX_COPIES_BEFORE_RESIZE {
                     log::info!("whole near copies in the exemplar's box ({BOX_COPIES_BEFORE_RESIZE}): the later attempts resize");
+                    self.copies_only.set(true);
+                } else if misses == BOX_MISSES_BEFORE_RESIZE {
+                    log::info!("{BOX_MISSES_BEFORE_RESIZE} passes in the exemplar's box, none whole and new: the later attempts resize");
                     self.copies_only.set(true);
                 }
             }
