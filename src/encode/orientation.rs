@@ -9,6 +9,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
+use crate::geom::splat::{DepthImage, View};
 use crate::level::Level;
 
 /// Below this share of the seen surface facing the eye, a shape's normals
@@ -54,32 +55,12 @@ pub fn facing_share(level: &Level) -> Option<f64> {
     let centre = points.iter().fold(Vec3::ZERO, |a, &p| a + p) / points.len() as f32;
     let reach = points.iter().map(|p| p.distance(centre)).fold(0.0, f32::max) + SPLAT_RADIUS;
     let half = (reach / PIXEL).ceil() as i64 + 1;
-    let size = (2 * half + 1) as usize;
-    let r = SPLAT_RADIUS / PIXEL;
-    let ri = r.ceil() as i64;
     let (facing, seen) = view_directions()
         .into_par_iter()
         .map(|toward| {
             let right = toward.any_orthonormal_vector();
-            let up = toward.cross(right);
-            let mut near = vec![f32::NEG_INFINITY; size * size];
-            let mut which = vec![u32::MAX; size * size];
-            for (i, &p) in points.iter().enumerate() {
-                let d = p - centre;
-                let (x, y, z) = (d.dot(right) / PIXEL + half as f32, d.dot(up) / PIXEL + half as f32, d.dot(toward));
-                let (cx, cy) = (x.floor() as i64, y.floor() as i64);
-                for py in (cy - ri).max(0)..=(cy + ri).min(size as i64 - 1) {
-                    for px in (cx - ri).max(0)..=(cx + ri).min(size as i64 - 1) {
-                        let (dx, dy) = (px as f32 + 0.5 - x, py as f32 + 0.5 - y);
-                        let k = py as usize * size + px as usize;
-                        if dx * dx + dy * dy <= r * r && z > near[k] {
-                            near[k] = z;
-                            which[k] = i as u32;
-                        }
-                    }
-                }
-            }
-            let seen: Vec<u32> = which.into_iter().filter(|&i| i != u32::MAX).collect();
+            let view = View { right, up: toward.cross(right), toward, centre, pixel: PIXEL, half };
+            let seen: Vec<u32> = DepthImage::splat(&points, &view, SPLAT_RADIUS).point.into_iter().filter(|&i| i != u32::MAX).collect();
             let facing = seen.iter().filter(|&&i| normals[i as usize].dot(toward) > 0.0).count();
             (facing, seen.len())
         })

@@ -5,4 +5,5 @@ pub mod edges;
 pub mod nearest;
 pub mod normals;
 pub mod points;
+pub mod splat;
 pub mod texture;

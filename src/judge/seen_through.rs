@@ -32,6 +32,7 @@ use rayon::prelude::*;
 
 use super::levels::STRUCTURE_RESOLUTION;
 use super::thresholds::THRESHOLDS;
+use crate::geom::splat::{DepthImage, View};
 use crate::level::Level;
 
 /// Elevations of the view bands, degrees above the horizontal. No top view:
@@ -104,29 +105,8 @@ fn render(points: &[Vec3], centre: Vec3, reach: f32, up: Vec3, toward: Vec3) -> 
     // A margin wider than the crack window: the closing must meet empty
     // pixels beyond the silhouette, or its rim would read as a crack.
     let half = ((reach + SPLAT_RADIUS + 2.0 * THRESHOLDS.crack_width) / PIXEL).ceil() as i64 + 1;
-    let size = (2 * half + 1) as usize;
-    let mut near = vec![f32::NEG_INFINITY; size * size];
-    let mut point = vec![u32::MAX; size * size];
-    let r = SPLAT_RADIUS / PIXEL;
-    let ri = r.ceil() as i64;
-    for (i, &p) in points.iter().enumerate() {
-        let d = p - centre;
-        let (x, y, z) = (d.dot(right) / PIXEL + half as f32, d.dot(screen_up) / PIXEL + half as f32, d.dot(toward));
-        let (cx, cy) = (x.floor() as i64, y.floor() as i64);
-        for py in (cy - ri).max(0)..=(cy + ri).min(size as i64 - 1) {
-            for px in (cx - ri).max(0)..=(cx + ri).min(size as i64 - 1) {
-                let (dx, dy) = (px as f32 + 0.5 - x, py as f32 + 0.5 - y);
-                if dx * dx + dy * dy > r * r {
-                    continue;
-                }
-                let k = py as usize * size + px as usize;
-                if z > near[k] {
-                    near[k] = z;
-                    point[k] = i as u32;
-                }
-            }
-        }
-    }
+    let view = View { right, up: screen_up, toward, centre, pixel: PIXEL, half };
+    let DepthImage { size, near, point } = DepthImage::splat(points, &view, SPLAT_RADIUS);
     Image { size, near, point }
 }
 
