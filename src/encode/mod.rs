@@ -200,9 +200,6 @@ pub struct EncodeStats {
     /// (resolution, active voxels) for every resolution from coarsest up to sampling,
     /// coarsest first (intermediate resolutions that are not output included).
     pub voxels_per_resolution: Vec<(u32, usize)>,
-    /// Whether the mesh's normals pointed inward and were turned
-    /// ([`orientation::face_outward`]).
-    pub normals_turned: bool,
 }
 
 impl EncodeStats {
@@ -321,7 +318,6 @@ pub fn encode(mesh: &Mesh, options: &EncodeOptions) -> Result<(Vec<Level>, Encod
         } else {
             log::debug!("'{}': {:.0}% of the surface seen from outside faces the eye", mesh.name, 100.0 * share);
         }
-        stats.normals_turned = turned;
     }
     stats.total_s = start.elapsed().as_secs_f64();
     log::debug!(

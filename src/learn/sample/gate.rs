@@ -129,15 +129,6 @@ impl Level0Pick {
         if !pass {
             return offer;
         }
-        let fscore = likeness.0;
-        // Whether `a` ranks before `b` under the policy.
-        let before = |a: (f64, f64), b: (f64, f64)| match self.policy {
-            // Less like the exemplar: a lower F-score, then a larger change.
-            Policy::Novel => (a.0, -a.1) < (b.0, -b.1),
-            // Likelier: a higher F-score, then a smaller change.
-            Policy::Likest => (-a.0, a.1) < (-b.0, b.1),
-            Policy::First => false,
-        };
         match self.policy {
             Policy::First => {
                 self.first = Some(k);
@@ -145,14 +136,16 @@ impl Level0Pick {
                 offer.stop = true;
             }
             Policy::Novel | Policy::Likest => {
-                if self.ranked.is_none_or(|(r, _)| before(likeness, r)) {
+                let likest = self.policy == Policy::Likest;
+                // Lower ranks first: the least like the exemplar (a lower
+                // F-score, then a larger change), or the likest (a higher
+                // F-score, then a smaller change).
+                let key = |(f, c): (f64, f64)| if likest { (-f, c) } else { (f, -c) };
+                if self.ranked.is_none_or(|(r, _)| key(likeness) < key(r)) {
                     self.ranked = Some((likeness, k));
                     offer.picked = true;
                 }
-                offer.stop = match self.policy {
-                    Policy::Novel => fscore < NEW_ENOUGH_LEVEL0_FSCORE,
-                    _ => fscore >= LIKE_ENOUGH_AT_EXTENT_FSCORE,
-                };
+                offer.stop = if likest { likeness.0 >= LIKE_ENOUGH_AT_EXTENT_FSCORE } else { likeness.0 < NEW_ENOUGH_LEVEL0_FSCORE };
             }
         }
         offer

@@ -147,7 +147,7 @@ pub fn sample_observed(
     } else {
         crate::judge::structure_level(exemplar_levels).map(|l| (l, Structure::of(l)))
     };
-    let copies_only = std::cell::Cell::new(false);
+    let nothing_new_in_box = std::cell::Cell::new(false);
     let resized_whole = std::cell::Cell::new(false);
     let box_misses = std::cell::Cell::new((0, 0));
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
@@ -164,7 +164,7 @@ pub fn sample_observed(
     tch::no_grad(|| {
         (opts.first..opts.first + opts.n)
             .map(|i| {
-                copies_only.set(false);
+                nothing_new_in_box.set(false);
                 resized_whole.set(false);
                 box_misses.set((0, 0));
                 let job = OneVariant {
@@ -179,7 +179,7 @@ pub fn sample_observed(
                     style: style.as_ref().map(|(l, s)| (*l, s)),
                     repairs: &repairs,
                     bending,
-                    copies_only: &copies_only,
+                    nothing_new_in_box: &nothing_new_in_box,
                     resized_whole: &resized_whole,
                     box_misses: &box_misses,
                     resizing,

@@ -47,9 +47,10 @@ pub(super) struct OneVariant<'a> {
     pub(super) repairs: &'a [LevelRepair],
     /// Whether a pass with nothing new at level 0 is the exemplar bent.
     pub(super) bending: Bending,
-    /// Set once a pass of this variant found its level-0 candidates none new
-    /// enough and resized: its later attempts start resized at once.
-    pub(super) copies_only: &'a std::cell::Cell<bool>,
+    /// Set once the exemplar's box offered this variant nothing whole and
+    /// new: level-0 candidates none new enough, a whole near copy, or passes
+    /// that were copies or broken. Its later attempts start resized at once.
+    pub(super) nothing_new_in_box: &'a std::cell::Cell<bool>,
     /// Whether a resized pass of this variant was whole: if none was, its
     /// last attempt takes the exemplar's box (a whole copy before a broken
     /// shape).
@@ -105,7 +106,7 @@ impl OneVariant<'_> {
     /// else the likest: the size is what is new, and a start unlike the
     /// exemplar at that size has lost a part.
     fn chosen_level0(&self, seed: u64, resolution0: u32, opts: &SampleOptions) -> Result<Start> {
-        if self.resizes() && self.copies_only.get() {
+        if self.resizes() && self.nothing_new_in_box.get() {
             if let Some(extent) = self.drawn_extent(seed, opts) {
                 return Ok(Start::Resized(extent));
             }
@@ -161,7 +162,7 @@ impl OneVariant<'_> {
                 _ => None,
             };
             if let Some((fscore, extent)) = copy_fscore.filter(|_| self.resizes()).and_then(|f| Some((f, self.drawn_extent(seed, opts)?))) {
-                self.copies_only.set(true);
+                self.nothing_new_in_box.set(true);
                 log::info!(
                     "level 0: none of {candidates} candidates new enough (the networks draw the exemplar: F {fscore:.3} at best): resized to extent {extent} instead"
                 );
@@ -266,7 +267,7 @@ impl OneVariant<'_> {
         let (a, rank, kept) = keep_attempt(attempts, opts.reject_copies, |a| {
             // The last attempt of a variant none of whose resized passes was
             // whole takes the exemplar's box.
-            let last_in_box = a + 1 == attempts && a > 0 && self.copies_only.get() && !self.resized_whole.get();
+            let last_in_box = a + 1 == attempts && a > 0 && self.nothing_new_in_box.get() && !self.resized_whole.get();
             let p = if last_in_box {
                 OneVariant { resizing: false, ..quiet }.pass(attempt_seed(self.seed, a), resolution0, opts, None, structure_index)?
             } else {
@@ -290,16 +291,16 @@ impl OneVariant<'_> {
             // floor), or passes there that are copies or broken: the
             // networks offer nothing whole and new in that box, and later
             // attempts resize.
-            if p.resized.is_none() && p.bend.is_none() && !(rank.whole && rank.new) && self.resizes() && !self.copies_only.get() {
+            if p.resized.is_none() && p.bend.is_none() && !(rank.whole && rank.new) && self.resizes() && !self.nothing_new_in_box.get() {
                 let (copies, misses) = self.box_misses.get();
                 let (copies, misses) = (copies + (rank.whole as usize), misses + 1);
                 self.box_misses.set((copies, misses));
                 if copies == BOX_COPIES_BEFORE_RESIZE {
                     log::info!("whole near copies in the exemplar's box ({BOX_COPIES_BEFORE_RESIZE}): the later attempts resize");
-                    self.copies_only.set(true);
+                    self.nothing_new_in_box.set(true);
                 } else if misses == BOX_MISSES_BEFORE_RESIZE {
                     log::info!("{BOX_MISSES_BEFORE_RESIZE} passes in the exemplar's box, none whole and new: the later attempts resize");
-                    self.copies_only.set(true);
+                    self.nothing_new_in_box.set(true);
                 }
             }
             if p.resized.is_some() {
