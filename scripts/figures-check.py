@@ -6,6 +6,12 @@ that only rewords comments there does not count). Exits 1
 when any figure is stale (or its sample text is gone from its pages), 0 when
 every figure is current. `make figures-check` runs it.
 
+A group with `record = true` is a dated record, not a current figure: a measurement
+that cannot be repeated here (a GPU lent for 15 minutes, a run of hours) or one kept for
+comparison. It is never stale, but each of its pages must show it labelled: some line
+holds both its `sample` and its `as_of` (a date or a commit), so a reader sees how old
+it is where they read it.
+
     scripts/figures-check.py            a line per figure, the stale ones with their newer commits
     scripts/figures-check.py --brief    only the stale ones
 """
@@ -52,8 +58,21 @@ def changes_code(commit, paths):
 def main():
     brief = "--brief" in sys.argv[1:]
     figures = tomllib.loads((ROOT / "docs/figures.toml").read_text())["figure"]
-    stale = 0
+    stale = records = 0
     for f in figures:
+        if f.get("record"):
+            unlabelled = [p for p in f["pages"] if not any(
+                f["sample"] in line and f["as_of"] in line
+                for line in (ROOT / p).read_text(errors="replace").splitlines())]
+            if unlabelled:
+                stale += 1
+                print(f"STALE {f['id']}: a record whose '{f['sample']}' has no line with its date "
+                      f"'{f['as_of']}' in {', '.join(unlabelled)}")
+            else:
+                records += 1
+                if not brief:
+                    print(f"record {f['id']}: as of {f['as_of']}, labelled on its pages")
+            continue
         problems = []
         try:
             git("cat-file", "-e", f["measured_at"] + "^{commit}")
@@ -78,7 +97,8 @@ def main():
             print(f"    reproduce: {f['command']}")
         elif not brief:
             print(f"ok    {f['id']}: measured at {f['measured_at'][:9]}, code unchanged since")
-    print(f"figures-check: {stale} of {len(figures)} figure groups are stale")
+    print(f"figures-check: {len(figures) - stale - records} figure groups current, "
+          f"{records} dated records, {stale} stale")
     return 1 if stale else 0
 
 

@@ -10,6 +10,7 @@ mod common;
 mod hostile_harness;
 
 mod commands;
+mod docs;
 mod encode_real;
 mod foundation;
 mod hostile;
