@@ -5,17 +5,21 @@
 # versions of what the build needs. Root only; installs debootstrap when
 # missing. Keeps the chroot in $BARE_ROOT (default /var/tmp/shapeshifter-bare)
 # for a second look; `make setup-check` runs it.
+#   BARE_FRESH=1  starts from a new chroot (what "a machine with nothing installed" means)
+#   BARE_TEST=1   then runs `make test` there too, timed from the bare system, with
+#                 ../shared bound read-only beside the copy (as CI has it)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=${BARE_ROOT:-/var/tmp/shapeshifter-bare}
 [ "$(id -u)" -eq 0 ] || { echo "setup-check: needs root (debootstrap, chroot)" >&2; exit 1; }
 command -v debootstrap >/dev/null || { apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q debootstrap; }
+[ "${BARE_FRESH:-0}" = 1 ] && rm -rf "$ROOT"
 if [ ! -x "$ROOT/usr/bin/apt-get" ]; then
   echo "setup-check: debootstrap bookworm (minbase) into $ROOT" >&2
   rm -rf "$ROOT"
   debootstrap --variant=minbase bookworm "$ROOT" http://deb.debian.org/debian >/dev/null
 fi
-cleanup() { for m in dev/pts dev sys proc; do umount -l "$ROOT/$m" 2>/dev/null || true; done; }
+cleanup() { for m in root/shared dev/pts dev sys proc; do umount -l "$ROOT/$m" 2>/dev/null || true; done; }
 trap cleanup EXIT
 mount -t proc proc "$ROOT/proc"
 mount -t sysfs sys "$ROOT/sys"
@@ -29,10 +33,14 @@ cp /usr/local/share/ca-certificates/*.crt "$ROOT/usr/local/share/ca-certificates
 [ -f /etc/pip.conf ] && cp /etc/pip.conf "$ROOT/etc/pip.conf"
 rm -rf "$ROOT/root/shapeshifter" && mkdir -p "$ROOT/root/shapeshifter"
 git archive HEAD | tar -x -C "$ROOT/root/shapeshifter"
+if [ "${BARE_TEST:-0}" = 1 ] && [ -d ../shared ]; then
+  mkdir -p "$ROOT/root/shared" && mount --bind -o ro ../shared "$ROOT/root/shared"
+fi
 echo "setup-check: before make setup the chroot has: $(chroot "$ROOT" sh -c 'command -v make g++ cargo rustc python3 ~/.cargo/bin/cargo || true' | tr '\n' ' ')" >&2
-chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin bash -c '
+chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb BARE_TEST="${BARE_TEST:-0}" PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin bash -c '
   set -euo pipefail
   cd /root/shapeshifter
+  bare=$(date +%s)
   apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q make ca-certificates >/dev/null
   update-ca-certificates >/dev/null
   start=$(date +%s)
@@ -46,4 +54,10 @@ chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb PATH=/usr/local/sbin:/usr/lo
   start=$(date +%s)
   make setup >/dev/null 2>&1
   echo "setup-check: a second make setup took $(( $(date +%s) - start )) s"
+  if [ "$BARE_TEST" = 1 ]; then
+    start=$(date +%s)
+    SHAPESHIFTER_NO_SKIPS=1 make test > /root/make-test.log 2>&1 || { tail -30 /root/make-test.log; exit 1; }
+    echo "setup-check: make test took $(( $(date +%s) - start )) s after set-up; $(( $(date +%s) - bare )) s from the bare system"
+    grep -E "^test result|nothing skipped|SKIPPED" /root/make-test.log | sed "s/^/setup-check: /"
+  fi
 '
