@@ -8,9 +8,9 @@ every figure is current. `make figures-check` runs it.
 
 A group with `record = true` is a dated record, not a current figure: a measurement
 that cannot be repeated here (a GPU lent for 15 minutes, a run of hours) or one kept for
-comparison. It is never stale, but each of its pages must show it labelled: some line
-holds both its `sample` and its `as_of` (a date or a commit), so a reader sees how old
-it is where they read it.
+comparison. It is never stale, but each of its pages must show it labelled: some paragraph
+or table (lines between blank lines) holds both its `sample` and its `as_of` (a date or
+a commit), so a reader sees how old it is where they read it.
 
     scripts/figures-check.py            a line per figure, the stale ones with their newer commits
     scripts/figures-check.py --brief    only the stale ones
@@ -62,11 +62,11 @@ def main():
     for f in figures:
         if f.get("record"):
             unlabelled = [p for p in f["pages"] if not any(
-                f["sample"] in line and f["as_of"] in line
-                for line in (ROOT / p).read_text(errors="replace").splitlines())]
+                f["sample"] in block and f["as_of"] in block
+                for block in (ROOT / p).read_text(errors="replace").split("\n\n"))]
             if unlabelled:
                 stale += 1
-                print(f"STALE {f['id']}: a record whose '{f['sample']}' has no line with its date "
+                print(f"STALE {f['id']}: a record whose '{f['sample']}' has no paragraph or table with its date "
                       f"'{f['as_of']}' in {', '.join(unlabelled)}")
             else:
                 records += 1
