@@ -76,7 +76,6 @@ pub(super) fn attempt_seed(seed: u64, a: usize) -> u64 {
 /// (docs/lab/single-buildings.md, "A Han house, and resizing after one copy").
 pub const BOX_COPIES_BEFORE_RESIZE: usize = 1;
 
-
 /// Passes in the exemplar's box that were not whole and new (copies or
 /// broken) after which a variant's later attempts are resized (with
 /// `resize_max`). A single building whose networks, trained with its normals
