@@ -74,17 +74,31 @@ fn every_measure_ranks_the_demo_ladder_as_expected() {
     assert!(sheet.width() > 6 * 320 && sheet.height() > 2 * 320, "{}x{}", sheet.width(), sheet.height());
 }
 
+/// The `ladder` and `render` commands as a user runs them, on the demo
+/// exemplar encoded with its finest level at the structure level (64^3):
+/// the ladder still runs every check that means something there and
+/// passes, and names the smoothing rungs' order and flags as skipped, not
+/// failed. (The 128^3 ladder is checked in-process above; the command
+/// runs the same stage, so this test keeps to the cheaper encoding.)
 #[test]
-fn ladder_and_contact_sheet_commands() {
+fn ladder_and_contact_sheet_commands_hold_when_the_finest_level_is_the_structure_level() {
     let dir = tempfile::tempdir().unwrap();
-    let (enc, _) = encoded_demo(dir.path());
-    let out = dir.path().join("lad");
+    let config = Config::load("demo", &["encode.finest_resolution=64".into()]).unwrap();
+    let mesh = exemplar::ruined_tower(&Default::default());
+    let enc = dir.path().join("exemplar64");
+    pipeline::encode_stage(&shapeshifter::io::exemplar::Exemplar::Mesh(mesh), "demo", "0", &config, &enc).unwrap();
+    let out = dir.path().join("lad64");
     let o = shapeshifter(&["ladder", enc.to_str().unwrap(), "-o", out.to_str().unwrap(), "--profile", "none"]);
-    assert!(o.status.success(), "{}\n{}", stdout(&o), stderr(&o));
     let text = stdout(&o);
+    assert_eq!(o.status.code(), Some(0), "{text}\n{}", stderr(&o));
     assert!(text.contains("expected order:") && text.contains("smooth_strong") && text.contains("skipped: untrained"), "{text}");
+    assert!(text.contains("skipped: the smoothing rungs' order") && !text.contains("FAILS"), "{text}");
+    // The structural rungs are still checked, and hold.
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("ladder.json")).unwrap()).unwrap();
     assert!(json["evaluation"]["parameters"]["colour"]["k"].is_number() && json["evaluation"]["lattice"]["dims"].is_array());
+    let checks = json["checks"].as_array().expect("checks");
+    assert!(checks.iter().any(|c| c["rung"] == "torn" && c["ok"] == true), "{checks:?}");
+    assert!(checks.len() >= 20, "{} checks", checks.len());
 
     // A contact sheet from folders, the exemplar first.
     let png = dir.path().join("sheet.png");
@@ -115,26 +129,4 @@ fn ladder_and_contact_sheet_commands() {
     assert!(!png2.exists());
     let o = shapeshifter(&["ladder", bad.to_str().unwrap(), "-o", dir.path().join("l2").to_str().unwrap(), "--profile", "none"]);
     assert_clean_failure(&o, "nothing_here", "manifest");
-}
-
-/// Encoded with its finest level at the structure level (64^3), the ladder
-/// still runs every check that means something there and passes; the
-/// smoothing rungs' order and flags are named as skipped, not failed.
-#[test]
-fn the_ladder_holds_when_the_finest_level_is_the_structure_level() {
-    let dir = tempfile::tempdir().unwrap();
-    let config = Config::load("demo", &["encode.finest_resolution=64".into()]).unwrap();
-    let mesh = exemplar::ruined_tower(&Default::default());
-    let enc = dir.path().join("exemplar64");
-    pipeline::encode_stage(&shapeshifter::io::exemplar::Exemplar::Mesh(mesh), "demo", "0", &config, &enc).unwrap();
-    let out = dir.path().join("lad64");
-    let o = shapeshifter(&["ladder", enc.to_str().unwrap(), "-o", out.to_str().unwrap(), "--profile", "none"]);
-    let text = stdout(&o);
-    assert!(o.status.success(), "{text}\n{}", stderr(&o));
-    assert!(text.contains("skipped: the smoothing rungs' order") && !text.contains("FAILS"), "{text}");
-    // The structural rungs are still checked, and hold.
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("ladder.json")).unwrap()).unwrap();
-    let checks = json["checks"].as_array().expect("checks");
-    assert!(checks.iter().any(|c| c["rung"] == "torn" && c["ok"] == true), "{checks:?}");
-    assert!(checks.len() >= 20, "{} checks", checks.len());
 }
