@@ -58,6 +58,7 @@ chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb BARE_TEST="${BARE_TEST:-0}" 
     start=$(date +%s)
     SHAPESHIFTER_NO_SKIPS=1 make test > /root/make-test.log 2>&1 || { tail -30 /root/make-test.log; exit 1; }
     echo "setup-check: make test took $(( $(date +%s) - start )) s after set-up; $(( $(date +%s) - bare )) s from the bare system"
-    grep -E "^test result|nothing skipped|SKIPPED" /root/make-test.log | sed "s/^/setup-check: /"
+    # The build (cargo'"'"'s "Finished ... in" of each build) and the tests ("finished in").
+    grep -E "^test result|nothing skipped|SKIPPED|Finished" /root/make-test.log | sed "s/^ */setup-check: /"
   fi
 '
