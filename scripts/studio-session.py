@@ -114,12 +114,16 @@ def main():
         res = s.get("/api/state")["resolutions"]
         top = res[1] - 1  # the last voxel of level 1 (32^3: 31)
 
+        def record(new, what, levels):
+            """One table row for a made shape, its preview saved beside."""
+            png = out / f"{new}.png"
+            png.write_bytes(s.call("GET", f"/api/shapes/{new}/preview.png", raw=True))
+            rows.append((what, " / ".join(levels), verdict(s.shape(new)["verdict"]), png.name))
+
         def regenerate(draft, what):
             job = s.finish(s.post("/api/jobs", {"kind": "regenerate", "draft": draft}))
             new = job["outputs"][0]
-            png = out / f"{new}.png"
-            png.write_bytes(s.call("GET", f"/api/shapes/{new}/preview.png", raw=True))
-            rows.append((what, " / ".join(ready(job)[new]), verdict(s.shape(new)["verdict"]), png.name))
+            record(new, what, ready(job)[new])
             return new
 
         # 1. The top of a variant deleted at level 1.
@@ -154,16 +158,12 @@ def main():
         src = f"variant_{a.like:03d}"
         job = s.finish(s.post("/api/jobs", {"kind": "more_like", "source": src, "keep_level": 1, "n": 2}))
         for new, levels in ready(job).items():
-            png = out / f"{new}.png"
-            png.write_bytes(s.call("GET", f"/api/shapes/{new}/preview.png", raw=True))
-            rows.append((f"more like `{src}` (levels to 32^3 kept)", " / ".join(levels), verdict(s.shape(new)["verdict"]), png.name))
+            record(new, f"more like `{src}` (levels to 32^3 kept)", levels)
 
         # 4. Two new variants.
         job = s.finish(s.post("/api/jobs", {"kind": "sample", "n": 2, "seed": 21}))
         for new, levels in ready(job).items():
-            png = out / f"{new}.png"
-            png.write_bytes(s.call("GET", f"/api/shapes/{new}/preview.png", raw=True))
-            rows.append(("a new variant (seed 21)", " / ".join(levels), verdict(s.shape(new)["verdict"]), png.name))
+            record(new, "a new variant (seed 21)", levels)
 
     finally:
         s.close()
