@@ -77,7 +77,7 @@ fn main() -> anyhow::Result<()> {
             let (x0, t) = batch(&mut rng)?;
             let t = Tensor::from_slice(&t);
             let start = Instant::now();
-            diffusion_step(&net.net, &mut opt, tc.lr, &x0, &t, tc.grad_clip, step as u64)?;
+            diffusion_step(&net.net, &mut opt, tc.lr, &x0, &t, tc.grad_clip, step as u64, step as u64)?;
             if step >= 2 {
                 seconds.push(start.elapsed().as_secs_f64());
                 rows.push(x0.len() as f64);

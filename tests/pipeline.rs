@@ -478,13 +478,14 @@ fn weights_of_another_parameterisation_are_refused() {
     assert!(e.contains("level_1_state.json") && e.contains("earlier parameterisation") && e.contains("train it again"), "{e}");
 }
 
-/// Training noise comes from the step's own seed: libtorch's global
-/// generator (what dropout and initialisation draw from) does not change it.
+/// Training noise and dropout masks come from the step's own seeds:
+/// libtorch's global generator (what initialisation draws from) does not
+/// change them.
 #[test]
 fn training_noise_ignores_the_global_generator() {
     use shapeshifter::learn::train::{diffusion_step, optim::Adam, TrainingData};
     let _guard = serial();
-    let config = tiny(&["model.dropout=0.0"]);
+    let config = tiny(&["model.dropout=0.2"]);
     let levels = exemplar();
     let loss = |global: i64| {
         tch::manual_seed(5);
@@ -493,7 +494,7 @@ fn training_noise_ignores_the_global_generator() {
         let mut batch = TrainingData::new(&levels, 0, Device::Cpu).unwrap().diffusion_batches(&config.train).unwrap();
         let (x0, t) = batch(&mut shapeshifter::util::rng::Rng::new(1)).unwrap();
         tch::manual_seed(global);
-        diffusion_step(&net.net, &mut opt, 1e-3, &x0, &Tensor::from_slice(&t), 1.0, 42).unwrap()
+        diffusion_step(&net.net, &mut opt, 1e-3, &x0, &Tensor::from_slice(&t), 1.0, 42, 42).unwrap()
     };
     assert_eq!(loss(1), loss(2));
 }

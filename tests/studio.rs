@@ -61,24 +61,7 @@ impl Studio {
     }
 
     fn request(&self, method: &str, path: &str, body: Option<&str>, headers: &[(&str, &str)]) -> (u16, Vec<u8>) {
-        let agent = ureq::AgentBuilder::new().timeout(Duration::from_secs(60)).build();
-        let mut r = agent.request(method, &format!("{}{path}", self.base));
-        for (k, v) in headers {
-            r = r.set(k, v);
-        }
-        let result = match body {
-            Some(b) => r.set("Content-Type", "application/json").send_string(b),
-            None => r.call(),
-        };
-        let resp = match result {
-            Ok(resp) => resp,
-            Err(ureq::Error::Status(_, resp)) => resp,
-            Err(e) => panic!("{method} {path}: {e}"),
-        };
-        let status = resp.status();
-        let mut bytes = Vec::new();
-        std::io::Read::read_to_end(&mut resp.into_reader(), &mut bytes).unwrap();
-        (status, bytes)
+        crate::common::http::request(&self.base, method, path, body.map(|b| ("application/json", b.as_bytes())), headers)
     }
 
     fn call(&self, method: &str, path: &str, body: Option<&str>) -> (u16, Value) {

@@ -49,6 +49,11 @@ impl OneThread {
         tch::set_num_threads(1);
         OneThread(before)
     }
+
+    /// The thread count before this guard (what it restores).
+    pub(crate) fn before(&self) -> i32 {
+        self.0
+    }
 }
 
 impl Drop for OneThread {

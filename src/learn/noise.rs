@@ -23,3 +23,15 @@ pub fn standard_normal(rows: usize, cols: usize, seed: u64, device: tch::Device)
     v.truncate(n);
     tch::Tensor::from_slice(&v).view([rows as i64, cols as i64]).to_device(device)
 }
+
+/// Dropout's keep mask of `rows` x `cols` from `seed` alone: each value 0
+/// with probability `p`, else `1 / (1 - p)` (so the mask keeps the
+/// expectation). Drawn here rather than by libtorch's global generator so
+/// that the parts of a training step can run on two threads at once and draw
+/// the same masks as on one ([`crate::learn::sparse::dropout_stream_scope`]).
+pub fn keep_mask(rows: usize, cols: usize, p: f64, seed: u64, device: tch::Device) -> tch::Tensor {
+    let mut rng = Rng::new(seed);
+    let keep = (1.0 / (1.0 - p)) as f32;
+    let v: Vec<f32> = (0..rows * cols).map(|_| if rng.uniform() < p { 0.0 } else { keep }).collect();
+    tch::Tensor::from_slice(&v).view([rows as i64, cols as i64]).to_device(device)
+}

@@ -283,6 +283,7 @@ pub fn run(exemplar: ExemplarSource, out: &Path, o: &RunOptions) -> Result<RunSu
     crate::util::interrupt::check()?;
     let t = Instant::now();
     let train_span = span(0.05, 0.80);
+    log::info!("{}", crate::learn::sparse::compute_path(o.device, config.train.bf16));
     let jobs = auto_jobs(o.jobs, o.device, o.threads);
     let threads = o.threads.max(1).to_string();
     if jobs > 1 {

@@ -34,6 +34,9 @@ pub enum Stream {
     /// The extent of one pass of a variant that starts from a resized box
     /// (`level::resize`).
     Resize = 14,
+    /// The dropout masks of one part of one diffusion training step
+    /// (`step` is the step; `index` the level, the part in the top bits).
+    TrainingDropout = 15,
 }
 
 /// SplitMix64 of the tuple (seed, index, stream, step): `index` is the level

@@ -4,6 +4,29 @@ use super::*;
 
 thread_local! {
     static BF16_COMPUTE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// The seed of this thread's dropout masks and the masks drawn so far,
+    /// where a training step set one ([`dropout_stream_scope`]).
+    static DROPOUT_STREAM: std::cell::Cell<Option<(u64, u64)>> = const { std::cell::Cell::new(None) };
+}
+
+/// Makes [`SparseDropout`] on this thread draw its masks from `seed` (the
+/// k-th mask from `seed` and k: [`crate::learn::noise::keep_mask`]) until
+/// the returned guard drops, instead of from libtorch's global generator,
+/// which two threads would draw from in either order.
+pub fn dropout_stream_scope(seed: u64) -> DropoutStreamScope {
+    let previous = DROPOUT_STREAM.with(|c| c.replace(Some((seed, 0))));
+    DropoutStreamScope { previous }
+}
+
+/// Restores the previous [`dropout_stream_scope`] when dropped.
+pub struct DropoutStreamScope {
+    previous: Option<(u64, u64)>,
+}
+
+impl Drop for DropoutStreamScope {
+    fn drop(&mut self) {
+        DROPOUT_STREAM.with(|c| c.set(self.previous));
+    }
 }
 
 /// Whether submanifold convolutions on this thread multiply in bf16.
@@ -21,14 +44,21 @@ pub fn bf16_compute_scope(on: bool) -> Bf16Scope {
 }
 
 /// Whether `device` multiplies bf16 in hardware: any CUDA device, or a CPU
-/// with AVX512-BF16 or AMX-BF16. Elsewhere libtorch emulates bf16, and a GEMM
-/// runs at about 2 GFLOP/s against 35-55 in f32 (measured on a 2-core AVX2 EPYC:
-/// a 64-channel level-0 training step 0.87 s in bf16, 0.078 s in f32), so mixed
-/// precision there would make training ten times slower, not faster.
+/// with AVX512-BF16 or AMX-BF16 that oneDNN (libtorch's bf16 GEMM) may use.
+/// Elsewhere libtorch emulates bf16, and a GEMM runs at about 2 GFLOP/s
+/// against 35-55 in f32 (measured on a 2-core AVX2 EPYC: a 64-channel
+/// level-0 training step 0.87 s in bf16, 0.078 s in f32), so mixed precision
+/// there would make training ten times slower, not faster.
+/// `ONEDNN_MAX_CPU_ISA` capped below AVX512_CORE_BF16 (`AVX2`, as when an
+/// AVX-512 machine stands in for an ordinary one) counts as no bf16.
 pub fn bf16_is_native(device: tch::Device) -> bool {
     if device.is_cuda() {
         return true;
     }
+    cpu_has_bf16() && !onednn_capped_below_bf16()
+}
+
+fn cpu_has_bf16() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         // Every CPU with AMX-BF16 also has AVX512-BF16.
@@ -37,6 +67,61 @@ pub fn bf16_is_native(device: tch::Device) -> bool {
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
+    }
+}
+
+/// Whether `ONEDNN_MAX_CPU_ISA` names an instruction set without bf16
+/// products (oneDNN's names: SSE41, AVX, AVX2, AVX2_VNNI, AVX512_CORE,
+/// AVX512_CORE_VNNI below; AVX512_CORE_BF16 and later, ALL, DEFAULT not).
+fn onednn_capped_below_bf16() -> bool {
+    let Ok(isa) = std::env::var("ONEDNN_MAX_CPU_ISA").or_else(|_| std::env::var("DNNL_MAX_CPU_ISA")) else {
+        return false;
+    };
+    let isa = isa.trim().to_ascii_uppercase();
+    ["SSE41", "AVX", "AVX2", "AVX2_VNNI", "AVX2_VNNI_2", "AVX512_CORE", "AVX512_CORE_VNNI"].contains(&isa.as_str())
+}
+
+/// How the networks multiply here, in one line for the log: the CPU (or
+/// the CUDA device), its widest vector instructions, and whether the
+/// convolutions run in bf16 (`want_bf16`, the profile's `train.bf16`, and
+/// the hardware has it) or f32.
+pub fn compute_path(device: tch::Device, want_bf16: bool) -> String {
+    let bf16 = want_bf16 && bf16_is_native(device);
+    let products = if bf16 { "bf16 products (f32 weights)" } else { "f32" };
+    if let tch::Device::Cuda(i) = device {
+        return format!("compute: CUDA device {i}: {products}");
+    }
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| t.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split_once(':')).map(|(_, m)| m.trim().to_string()))
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+    let isa = cpu_isa();
+    let capped = if cpu_has_bf16() && onednn_capped_below_bf16() { ", ONEDNN_MAX_CPU_ISA below bf16" } else { "" };
+    let why = match (want_bf16, bf16) {
+        (true, false) => " (train.bf16 is on, but without bf16 in hardware f32 is about 10x faster than emulated bf16)",
+        (false, _) => " (train.bf16 is off)",
+        _ => "",
+    };
+    format!("compute: {model}, {} libtorch threads, {isa}{capped}: {products}{why}", tch::get_num_threads())
+}
+
+/// The widest x86 vector instructions the CPU offers, as a user names them.
+fn cpu_isa() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512bf16") {
+            "AVX-512 with BF16"
+        } else if std::arch::is_x86_feature_detected!("avx512f") {
+            "AVX-512 without BF16"
+        } else if std::arch::is_x86_feature_detected!("avx2") {
+            "AVX2"
+        } else {
+            "no AVX2"
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        std::env::consts::ARCH
     }
 }
 
@@ -209,6 +294,15 @@ impl SparseDropout {
         if !train || self.p == 0.0 {
             return x.clone();
         }
-        x.map(|f| f.dropout(self.p, train))
+        match DROPOUT_STREAM.with(|c| c.get()) {
+            Some((seed, k)) => {
+                DROPOUT_STREAM.with(|c| c.set(Some((seed, k + 1))));
+                let (rows, cols) = (x.feats.size()[0] as usize, x.feats.size()[1] as usize);
+                let mask_seed = crate::util::rng::Rng::new(seed ^ k.wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64();
+                let mask = crate::learn::noise::keep_mask(rows, cols, self.p, mask_seed, x.device()).to_kind(x.feats.kind());
+                x.map(|f| f * mask)
+            }
+            None => x.map(|f| f.dropout(self.p, train)),
+        }
     }
 }

@@ -211,9 +211,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
     let t0 = Instant::now();
     let tc = &config.train;
     let bf16 = tc.bf16 && crate::learn::sparse::bf16_is_native(device);
-    if tc.bf16 && !bf16 {
-        log::info!("level {level}: train.bf16 is on, but this CPU has no bf16 instructions (AVX512-BF16, AMX): the convolutions multiply in f32, about 10x faster here than emulated bf16");
-    }
+    log::info!("level {level}: {}", crate::learn::sparse::compute_path(device, tc.bf16));
     let _bf16 = crate::learn::sparse::bf16_compute_scope(bf16);
     let digest = resume_digest(config);
 
@@ -343,7 +341,8 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
             let (x0, t_rows) = make_batch(&mut rng)?;
             let t_rows = Tensor::from_slice(&t_rows).to_device(device);
             let noise_seed = derive_seed(tc.seed, level as u64, Stream::TrainingNoise, step as u64);
-            let loss = diffusion_step(net, &mut diff_opt.borrow_mut(), lr(step, diff_total, tc.lr), &x0, &t_rows, tc.grad_clip, noise_seed)?;
+            let dropout_seed = derive_seed(tc.seed, level as u64, Stream::TrainingDropout, step as u64);
+            let loss = diffusion_step(net, &mut diff_opt.borrow_mut(), lr(step, diff_total, tc.lr), &x0, &t_rows, tc.grad_clip, noise_seed, dropout_seed)?;
             if let Some(e) = ema.borrow_mut().as_mut() {
                 e.update();
             }
@@ -482,6 +481,16 @@ impl TrainingData {
 /// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`):
 /// noise (drawn from `noise_seed` alone, not from libtorch's global
 /// generator), forward, MSE to x0, backward, clipped step; returns the loss.
+///
+/// The batch's items are cut into two parts (where it has two or more),
+/// each with its own forward and backward pass and its own dropout masks
+/// (drawn from `dropout_seed` and the part); the parts' gradients are
+/// added, part 0's first, and the step is taken once. With two or more
+/// libtorch threads (a level that trains alone, or was granted the cores
+/// of levels that finished) the parts run on two threads at once, each on
+/// one libtorch thread; with one they run one after the other. Either way
+/// every operation sees the same rows in the same order, so the weights
+/// are the same bits whatever the thread count.
 #[allow(clippy::too_many_arguments)]
 pub fn diffusion_step(
     net: &DiffusionNet,
@@ -491,26 +500,114 @@ pub fn diffusion_step(
     t_rows: &Tensor,
     clip: f64,
     noise_seed: u64,
+    dropout_seed: u64,
 ) -> Result<f64> {
     let size = x0.feats.size();
     let eps = crate::learn::noise::standard_normal(size[0] as usize, size[1] as usize, noise_seed, x0.feats.device())
         .to_kind(x0.feats.kind());
     let x_t = x0.with_feats(Schedule::default().add_noise_rows(&x0.feats, t_rows, &eps))?;
-    // On the CPU the step runs on one thread, whatever the process has:
-    // elementwise sin, cos and exp (the time embedding, SiLU) and their
-    // gradients split their rows by thread, and on an AVX-512 machine the
-    // rows at a split's ragged end came out in other bits, so weights
-    // depended on the thread count (and a run on its granted cores,
-    // `thread_grant_path`, differed from its resumed or staged twin).
-    let _one = (x0.feats.device() == Device::Cpu).then(crate::learn::OneThread::new);
-    let pred = net.forward_t(&x_t, t_rows, true)?;
-    let loss = mse(&pred.feats, &x0.feats);
-    opt.zero_grad();
-    loss.backward();
-    opt.clip_grad_norm(clip);
-    opt.step(lr);
-    Ok(loss.double_value(&[]))
+    // On the CPU each part runs on one libtorch thread, whatever the
+    // process has: elementwise sin, cos and exp (the time embedding, SiLU)
+    // and their gradients split their rows by thread, and on an AVX-512
+    // machine the rows at a split's ragged end came out in other bits, so
+    // weights depended on the thread count (and a run on its granted cores,
+    // `thread_grant_path`, differed from its resumed or staged twin). The
+    // cores are used by running the parts side by side instead.
+    let cpu = x0.feats.device() == Device::Cpu;
+    let one = cpu.then(crate::learn::OneThread::new);
+    let side_by_side = one.as_ref().is_some_and(|o| o.before() >= 2);
+    let parts = step_parts(&x_t, x0, t_rows)?;
+    // Each part's loss is its share of the whole batch's mean square error.
+    let elements = (size[0] * size[1]).max(1) as f64;
+    let weights = opt.weights();
+    let bf16 = crate::learn::sparse::bf16_compute();
+    let part_grads = |i: usize, (x_t, t, target): &StepPart| -> Result<(Vec<Tensor>, f64)> {
+        let _bf16 = crate::learn::sparse::bf16_compute_scope(bf16);
+        let _dropout = crate::learn::sparse::dropout_stream_scope(Rng::new(dropout_seed ^ (i as u64 + 1)).next_u64());
+        let pred = net.forward_t(x_t, t, true)?;
+        let loss = (&pred.feats - target).square().sum(Kind::Float) / elements;
+        let grads = Tensor::run_backward(&[&loss], &weights, false, false);
+        Ok((grads, loss.double_value(&[])))
+    };
+    let results: Vec<Result<(Vec<Tensor>, f64)>> = if side_by_side && parts.len() == 2 {
+        let shared = SharedAcrossThreads(&part_grads);
+        let second = SharedAcrossThreads(&parts[1]);
+        std::thread::scope(|s| {
+            let other = s.spawn(move || {
+                let (f, part) = (shared, second);
+                (f.0)(1, part.0)
+            });
+            let first = part_grads(0, &parts[0]);
+            let second = other.join().unwrap_or_else(|p| std::panic::resume_unwind(p));
+            vec![first, second]
+        })
+    } else {
+        parts.iter().enumerate().map(|(i, p)| part_grads(i, p)).collect()
+    };
+    let mut grads: Option<Vec<Tensor>> = None;
+    let mut loss = 0.0;
+    for r in results {
+        let (g, l) = r?;
+        loss += l;
+        grads = Some(match grads {
+            None => g,
+            Some(sum) => tch::no_grad(|| sum.iter().zip(&g).map(|(a, b)| add_defined(a, b)).collect()),
+        });
+    }
+    let grads: Vec<Tensor> = grads
+        .unwrap_or_default()
+        .into_iter()
+        .zip(&weights)
+        .map(|(g, w)| if g.defined() { g } else { tch::no_grad(|| w.zeros_like()) })
+        .collect();
+    opt.step_with(&grads, clip, lr);
+    drop(one);
+    Ok(loss)
 }
+
+/// One part of a training step's batch: the noised items, their times per
+/// row, their clean features.
+type StepPart = (SparseTensor, Tensor, Tensor);
+
+/// The batch `x_t` (and its clean features `x0`, times `t_rows`) cut into
+/// two parts of whole items, the first holding the first half (rounded up);
+/// one part where the batch has a single item.
+fn step_parts(x_t: &SparseTensor, x0: &SparseTensor, t_rows: &Tensor) -> Result<Vec<StepPart>> {
+    let items = x_t.split();
+    if items.len() < 2 {
+        return Ok(vec![(x_t.clone(), t_rows.shallow_clone(), x0.feats.shallow_clone())]);
+    }
+    let ranges = x_t.grid.batch_ranges();
+    let half = items.len().div_ceil(2);
+    [(0, half), (half, items.len())]
+        .into_iter()
+        .map(|(lo, hi)| {
+            let (start, end) = (ranges[lo].start as i64, ranges[hi - 1].end as i64);
+            let part = SparseTensor::batch(&items[lo..hi].iter().collect::<Vec<_>>())?;
+            Ok((part, t_rows.narrow(0, start, end - start), x0.feats.narrow(0, start, end - start)))
+        })
+        .collect()
+}
+
+/// `a + b` where both are defined, else the defined one.
+fn add_defined(a: &Tensor, b: &Tensor) -> Tensor {
+    match (a.defined(), b.defined()) {
+        (true, true) => a + b,
+        (true, false) => a.shallow_clone(),
+        _ => b.shallow_clone(),
+    }
+}
+
+/// A reference handed to the second thread of a training step.
+struct SharedAcrossThreads<'a, T: ?Sized>(&'a T);
+
+// SAFETY: `diffusion_step` hands one part of its batch and its part closure
+// to a scoped thread that it joins before it returns. The part's tensors
+// are only read there; the closure reads the network's weights (libtorch
+// allows concurrent reads of a tensor, and creates a leaf's gradient
+// accumulator under a lock) and builds its own graph, whose gradients it
+// returns without accumulating them into the weights (`run_backward`).
+unsafe impl<T: ?Sized> Send for SharedAcrossThreads<'_, T> {}
 
 /// The libtorch threads the parent process grants this level's training
 /// ([`thread_grant_path`]): when the other levels' processes have ended, the

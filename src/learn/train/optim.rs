@@ -42,6 +42,26 @@ pub struct Adam {
     decoupled: bool,
 }
 
+/// Scales `grads` in place so that their joint L2 norm is at most `max`.
+fn clip_norm(grads: &[Tensor], max: f64) {
+    tch::no_grad(|| {
+        let grads: Vec<&Tensor> = grads.iter().filter(|g| g.defined()).collect();
+        if grads.is_empty() {
+            return;
+        }
+        // (Training calls this inside its step's one-thread guard: a
+        // whole-tensor norm's parts are added in a thread-count order.)
+        let norms: Vec<Tensor> = grads.iter().map(|g| g.norm()).collect();
+        let total = Tensor::stack(&norms, 0).norm().double_value(&[]);
+        let coef = max / (total + 1e-6);
+        if coef < 1.0 {
+            for g in grads {
+                let _ = g.shallow_clone().g_mul_scalar_(coef);
+            }
+        }
+    });
+}
+
 impl Adam {
     /// Over the trainable weights of `vs`; `tch`'s defaults: betas (0.9,
     /// 0.999), eps 1e-8; weight decay 0 for Adam, 0.01 for AdamW.
@@ -66,36 +86,41 @@ impl Adam {
 
     /// Scales the gradients so that their joint L2 norm is at most `max`.
     pub fn clip_grad_norm(&self, max: f64) {
-        tch::no_grad(|| {
-            let grads: Vec<Tensor> = self.params.iter().map(|(_, p, _, _)| p.grad()).filter(|g| g.defined()).collect();
-            if grads.is_empty() {
-                return;
-            }
-            // (Training calls this inside its step's one-thread guard: a
-            // whole-tensor norm's parts are added in a thread-count order.)
-            let norms: Vec<Tensor> = grads.iter().map(|g| g.norm()).collect();
-            let total = Tensor::stack(&norms, 0).norm().double_value(&[]);
-            let coef = max / (total + 1e-6);
-            if coef < 1.0 {
-                for mut g in grads {
-                    let _ = g.g_mul_scalar_(coef);
-                }
-            }
-        });
+        let grads: Vec<Tensor> = self.params.iter().map(|(_, p, _, _)| p.grad()).filter(|g| g.defined()).collect();
+        clip_norm(&grads, max);
+    }
+
+    /// The trainable weights, in the order [`Adam::step_with`] takes their gradients.
+    pub fn weights(&self) -> Vec<Tensor> {
+        self.params.iter().map(|(_, p, _, _)| p.shallow_clone()).collect()
+    }
+
+    /// Clips `grads` (one per weight, in [`Adam::weights`]' order) to a
+    /// joint L2 norm of at most `clip`, then one update at learning rate
+    /// `lr` with them: [`Adam::clip_grad_norm`] and [`Adam::step`] on
+    /// gradients computed apart from the weights' own (a training step's
+    /// parts, `train::diffusion_step`).
+    pub fn step_with(&mut self, grads: &[Tensor], clip: f64, lr: f64) {
+        assert_eq!(grads.len(), self.params.len(), "one gradient per weight");
+        clip_norm(grads, clip);
+        self.update(grads.iter().map(|g| Some(g.shallow_clone())).collect(), lr);
     }
 
     /// One update at learning rate `lr`.
     pub fn step(&mut self, lr: f64) {
+        let grads = self.params.iter().map(|(_, p, _, _)| Some(p.grad()).filter(|g| g.defined())).collect();
+        self.update(grads, lr);
+    }
+
+    /// One update with `grads` (None: the weight is left as it is).
+    fn update(&mut self, grads: Vec<Option<Tensor>>, lr: f64) {
         self.steps += 1;
         let bias1 = 1.0 - self.beta1.powi(self.steps as i32);
         let bias2 = 1.0 - self.beta2.powi(self.steps as i32);
         let (b1, b2, eps, wd, decoupled) = (self.beta1, self.beta2, self.eps, self.weight_decay, self.decoupled);
         tch::no_grad(|| {
-            for (_, p, m, v) in self.params.iter_mut() {
-                let g = p.grad();
-                if !g.defined() {
-                    continue;
-                }
+            for ((_, p, m, v), g) in self.params.iter_mut().zip(grads) {
+                let Some(g) = g else { continue };
                 let g = if !decoupled && wd != 0.0 { &g + &*p * wd } else { g };
                 if decoupled && wd != 0.0 {
                     let _ = p.g_mul_scalar_(1.0 - lr * wd);
