@@ -15,7 +15,7 @@ use clap::Parser;
 use shapeshifter::config::Config;
 use shapeshifter::encode::{encode, exemplar};
 use shapeshifter::learn::nn::new_diffusion;
-use shapeshifter::learn::train::{diffusion_step, TrainingData};
+use shapeshifter::learn::train::{diffusion_step, StepSeeds, TrainingData};
 use shapeshifter::util::rng::Rng;
 use tch::{Device, Kind, Tensor};
 
@@ -30,7 +30,8 @@ struct Args {
     /// Timed steps per level (after 2 warm-up steps); the median is reported.
     #[arg(long, default_value_t = 10)]
     steps: usize,
-    /// libtorch threads.
+    /// Cores: 1, or 2 for a step's two parts side by side (libtorch itself
+    /// runs on one thread in training, as here).
     #[arg(long, default_value_t = 1)]
     threads: i32,
 }
@@ -55,7 +56,8 @@ fn gemm_seconds(rows: i64, k: i64, c: i64, kind: Kind) -> f64 {
 fn main() -> anyhow::Result<()> {
     shapeshifter::util::alloc::tune_allocator();
     let args = Args::parse();
-    tch::set_num_threads(args.threads);
+    // Training runs libtorch on one thread per core (train::diffusion_step).
+    tch::set_num_threads(1);
     let config = Config::load(&args.profile, &args.overrides)?;
     let (levels, _) = encode(&exemplar::ruined_tower(&Default::default()), &shapeshifter::pipeline::encode_options(&config))?;
     let tc = &config.train;
@@ -77,7 +79,8 @@ fn main() -> anyhow::Result<()> {
             let (x0, t) = batch(&mut rng)?;
             let t = Tensor::from_slice(&t);
             let start = Instant::now();
-            diffusion_step(&net.net, &mut opt, tc.lr, &x0, &t, tc.grad_clip, step as u64, step as u64)?;
+            let seeds = StepSeeds { noise: step as u64, dropout: step as u64 };
+            diffusion_step(&net.net, &mut opt, tc.lr, &x0, &t, tc.grad_clip, seeds, args.threads >= 2)?;
             if step >= 2 {
                 seconds.push(start.elapsed().as_secs_f64());
                 rows.push(x0.len() as f64);

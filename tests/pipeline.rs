@@ -112,8 +112,9 @@ fn training_lowers_the_loss_at_level_0_and_1() {
 /// Level 0's and level 1's weights do not depend on libtorch's thread count,
 /// not even when it changes while a level trains (a finished level's cores
 /// granted to one still training, pipeline::children): the same bytes with 1
-/// thread, 2 threads, and 1 thread granted 2 at the first step. (Level 0's
-/// differed with 2 threads when its target's blur used them.)
+/// thread (a step's two parts one after the other), 2 threads (side by
+/// side), and 1 thread granted 2 at the first step. (Level 0's differed
+/// with 2 threads when its target's blur used them.)
 #[test]
 fn weights_do_not_depend_on_the_thread_count() {
     use shapeshifter::learn::checkpoint::{diffusion_checkpoint, thread_grant_path};
@@ -124,21 +125,22 @@ fn weights_do_not_depend_on_the_thread_count() {
     let weights = |threads: i32, grant: Option<i32>| {
         tch::set_num_threads(threads);
         let dir = tempfile::tempdir().unwrap();
-        let mut files = Vec::new();
+        let (mut files, mut cores) = (Vec::new(), 0);
         for k in 0..2 {
             if let Some(g) = grant {
                 std::fs::write(thread_grant_path(dir.path(), k), g.to_string()).unwrap();
             }
-            train_level(&TrainJob::new(&levels, k, &config, Device::Cpu, dir.path())).unwrap();
+            cores = train_level(&TrainJob::new(&levels, k, &config, Device::Cpu, dir.path())).unwrap().cores;
             files.push(std::fs::read(diffusion_checkpoint(dir.path(), k)).unwrap());
         }
-        (files, tch::get_num_threads())
+        (files, cores)
     };
     let (one, _) = weights(1, None);
-    let (two, _) = weights(2, None);
+    let (two, two_cores) = weights(2, None);
     let (granted, threads_after) = weights(1, Some(2));
     tch::set_num_threads(1);
     assert_eq!(threads_after, 2, "the grant was read");
+    assert_eq!(two_cores, 2, "two threads: two cores, the parts side by side");
     for k in 0..2 {
         assert!(one[k] == two[k], "level {k}: the weights differ between 1 and 2 threads");
         assert!(one[k] == granted[k], "level {k}: the weights differ when 2 threads are granted while training");
@@ -483,7 +485,7 @@ fn weights_of_another_parameterisation_are_refused() {
 /// change them.
 #[test]
 fn training_noise_ignores_the_global_generator() {
-    use shapeshifter::learn::train::{diffusion_step, optim::Adam, TrainingData};
+    use shapeshifter::learn::train::{diffusion_step, optim::Adam, StepSeeds, TrainingData};
     let _guard = serial();
     let config = tiny(&["model.dropout=0.2"]);
     let levels = exemplar();
@@ -494,7 +496,7 @@ fn training_noise_ignores_the_global_generator() {
         let mut batch = TrainingData::new(&levels, 0, Device::Cpu).unwrap().diffusion_batches(&config.train).unwrap();
         let (x0, t) = batch(&mut shapeshifter::util::rng::Rng::new(1)).unwrap();
         tch::manual_seed(global);
-        diffusion_step(&net.net, &mut opt, 1e-3, &x0, &Tensor::from_slice(&t), 1.0, 42, 42).unwrap()
+        diffusion_step(&net.net, &mut opt, 1e-3, &x0, &Tensor::from_slice(&t), 1.0, StepSeeds { noise: 42, dropout: 42 }, false).unwrap()
     };
     assert_eq!(loss(1), loss(2));
 }

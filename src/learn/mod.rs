@@ -46,18 +46,18 @@ pub(crate) struct OneThread(i32);
 impl OneThread {
     pub(crate) fn new() -> Self {
         let before = tch::get_num_threads();
-        tch::set_num_threads(1);
+        if before != 1 {
+            tch::set_num_threads(1);
+        }
         OneThread(before)
     }
 
-    /// The thread count before this guard (what it restores).
-    pub(crate) fn before(&self) -> i32 {
-        self.0
-    }
 }
 
 impl Drop for OneThread {
     fn drop(&mut self) {
-        tch::set_num_threads(self.0);
+        if self.0 != 1 {
+            tch::set_num_threads(self.0);
+        }
     }
 }

@@ -93,6 +93,17 @@ pub struct SparseGrid {
     batch_size: Option<usize>,
     kernel_maps: [OnceLock<Arc<KernelMap>>; MAX_KERNEL_SIZE.div_ceil(2)],
     subdivision: OnceLock<Arc<Subdivision>>,
+    halves: OnceLock<Option<Arc<Halves>>>,
+}
+
+/// A batch cut into two batches of whole items ([`SparseGrid::halves`]): the
+/// first holds the first half of the items (rounded up), the rows before
+/// `split_row`; the second the rest, its items numbered from 0.
+#[derive(Debug)]
+pub struct Halves {
+    pub first: Arc<SparseGrid>,
+    pub second: Arc<SparseGrid>,
+    pub split_row: usize,
 }
 
 impl std::fmt::Debug for SparseGrid {
@@ -124,6 +135,7 @@ impl SparseGrid {
             batch_size,
             kernel_maps: Default::default(),
             subdivision: OnceLock::new(),
+            halves: OnceLock::new(),
         }
     }
 
@@ -547,6 +559,25 @@ impl SparseGrid {
             keys.par_extend(g.keys.par_iter().map(|&k| ((b as u64) << 48) | k));
         }
         Ok(Self::from_sorted_keys(first.resolution, keys, Some(grids.len())))
+    }
+
+    /// The batch cut into two batches of whole items (None for fewer than two
+    /// items), computed on first use and cached like the kernel maps, so a
+    /// batch used again (level 0's training batch, every step) cuts once
+    /// and each half keeps its own cached kernel maps.
+    pub fn halves(&self) -> Option<Arc<Halves>> {
+        self.halves
+            .get_or_init(|| {
+                let items = self.batch_size.filter(|&b| b >= 2)?;
+                let first_items = items.div_ceil(2);
+                let split_row = self.batch_ranges()[first_items].start;
+                let rebase = (first_items as u64) << 48;
+                let first = Self::from_sorted_keys(self.resolution, self.keys[..split_row].to_vec(), Some(first_items));
+                let second_keys = self.keys[split_row..].iter().map(|&k| k - rebase).collect();
+                let second = Self::from_sorted_keys(self.resolution, second_keys, Some(items - first_items));
+                Some(Arc::new(Halves { first: Arc::new(first), second: Arc::new(second), split_row }))
+            })
+            .clone()
     }
 
     /// The items of a batched grid as unbatched grids with their row ranges (an

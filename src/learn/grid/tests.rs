@@ -182,3 +182,19 @@ fn batching_and_splitting() {
             .unwrap();
     assert_eq!(from_batched, ab);
 }
+
+/// A batch's halves are batches of its whole items, the first half rounded
+/// up, the second's items numbered from 0; cached; none for one item.
+#[test]
+fn halves_cut_a_batch_between_whole_items() {
+    let a = SparseGrid::from_coords(8, &[IVec3::new(5, 5, 5), IVec3::new(0, 0, 0)]).unwrap();
+    let b = SparseGrid::from_coords(8, &[IVec3::new(1, 2, 3)]).unwrap();
+    let c = SparseGrid::from_coords(8, &[IVec3::new(7, 7, 7), IVec3::new(2, 2, 2), IVec3::new(3, 3, 3)]).unwrap();
+    let abc = SparseGrid::batch(&[&a, &b, &c]).unwrap();
+    let h = abc.halves().expect("three items have halves");
+    assert_eq!(h.split_row, 3);
+    assert_eq!(*h.first, SparseGrid::batch(&[&a, &b]).unwrap());
+    assert_eq!(*h.second, SparseGrid::batch(&[&c]).unwrap());
+    assert!(Arc::ptr_eq(&h, &abc.halves().unwrap()), "computed once");
+    assert!(a.halves().is_none() && SparseGrid::batch(&[&a]).unwrap().halves().is_none());
+}

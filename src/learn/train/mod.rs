@@ -91,6 +91,9 @@ pub struct TrainReport {
     pub interrupted: bool,
     /// Voxels of one training item (the box at level 0, the subdivided grid above).
     pub grid_voxels: usize,
+    /// The cores the level had at its end (its process's libtorch threads,
+    /// or more where the cores of levels that finished were granted to it).
+    pub cores: i32,
 }
 
 /// One level's training: what to train, where, and how.
@@ -277,6 +280,12 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         seconds_before,
     };
     let grant = ThreadGrant::new(out_dir, level, device);
+    // On the CPU every libtorch operation of the level runs on one thread
+    // (see `diffusion_step`); the level's cores are used by running a
+    // step's two parts side by side. Set once for the whole level: turning
+    // libtorch's threads down and up at every step left OpenMP's idle
+    // workers spinning on the core the second part needed.
+    let _one_thread = (device == Device::Cpu).then(crate::learn::OneThread::new);
     let mut interrupted = false;
     // A stop signal (util::interrupt) ends training like the job's own flag:
     // after the current step, with a checkpoint.
@@ -342,7 +351,9 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
             let t_rows = Tensor::from_slice(&t_rows).to_device(device);
             let noise_seed = derive_seed(tc.seed, level as u64, Stream::TrainingNoise, step as u64);
             let dropout_seed = derive_seed(tc.seed, level as u64, Stream::TrainingDropout, step as u64);
-            let loss = diffusion_step(net, &mut diff_opt.borrow_mut(), lr(step, diff_total, tc.lr), &x0, &t_rows, tc.grad_clip, noise_seed, dropout_seed)?;
+            let side_by_side = grant.cores() >= 2;
+            let seeds = StepSeeds { noise: noise_seed, dropout: dropout_seed };
+            let loss = diffusion_step(net, &mut diff_opt.borrow_mut(), lr(step, diff_total, tc.lr), &x0, &t_rows, tc.grad_clip, seeds, side_by_side)?;
             if let Some(e) = ema.borrow_mut().as_mut() {
                 e.update();
             }
@@ -380,6 +391,7 @@ pub fn train_level(job: &TrainJob) -> Result<TrainReport> {
         finished: state.finished,
         interrupted,
         grid_voxels,
+        cores: grant.cores(),
     })
 }
 
@@ -478,6 +490,13 @@ impl TrainingData {
     }
 }
 
+/// The seeds of one training step: its noise eps and its dropout masks.
+#[derive(Clone, Copy, Debug)]
+pub struct StepSeeds {
+    pub noise: u64,
+    pub dropout: u64,
+}
+
 /// One optimiser step of the diffusion model on `x0` (per-row times `t_rows`):
 /// noise (drawn from `noise_seed` alone, not from libtorch's global
 /// generator), forward, MSE to x0, backward, clipped step; returns the loss.
@@ -486,11 +505,11 @@ impl TrainingData {
 /// each with its own forward and backward pass and its own dropout masks
 /// (drawn from `dropout_seed` and the part); the parts' gradients are
 /// added, part 0's first, and the step is taken once. With two or more
-/// libtorch threads (a level that trains alone, or was granted the cores
-/// of levels that finished) the parts run on two threads at once, each on
-/// one libtorch thread; with one they run one after the other. Either way
-/// every operation sees the same rows in the same order, so the weights
-/// are the same bits whatever the thread count.
+/// `side_by_side` (a level that has two cores: it trains alone, or was
+/// granted the cores of levels that finished) the parts run on two threads
+/// at once, each on one libtorch thread; else one after the other. Either
+/// way every operation sees the same rows in the same order, so the
+/// weights are the same bits whatever the thread count.
 #[allow(clippy::too_many_arguments)]
 pub fn diffusion_step(
     net: &DiffusionNet,
@@ -499,9 +518,10 @@ pub fn diffusion_step(
     x0: &SparseTensor,
     t_rows: &Tensor,
     clip: f64,
-    noise_seed: u64,
-    dropout_seed: u64,
+    seeds: StepSeeds,
+    side_by_side: bool,
 ) -> Result<f64> {
+    let StepSeeds { noise: noise_seed, dropout: dropout_seed } = seeds;
     let size = x0.feats.size();
     let eps = crate::learn::noise::standard_normal(size[0] as usize, size[1] as usize, noise_seed, x0.feats.device())
         .to_kind(x0.feats.kind());
@@ -513,9 +533,7 @@ pub fn diffusion_step(
     // weights depended on the thread count (and a run on its granted cores,
     // `thread_grant_path`, differed from its resumed or staged twin). The
     // cores are used by running the parts side by side instead.
-    let cpu = x0.feats.device() == Device::Cpu;
-    let one = cpu.then(crate::learn::OneThread::new);
-    let side_by_side = one.as_ref().is_some_and(|o| o.before() >= 2);
+    let one = (x0.feats.device() == Device::Cpu).then(crate::learn::OneThread::new);
     let parts = step_parts(&x_t, x0, t_rows)?;
     // Each part's loss is its share of the whole batch's mean square error.
     let elements = (size[0] * size[1]).max(1) as f64;
@@ -535,6 +553,9 @@ pub fn diffusion_step(
         std::thread::scope(|s| {
             let other = s.spawn(move || {
                 let (f, part) = (shared, second);
+                // OpenMP's thread count is per thread: a new thread starts
+                // with as many as the machine has cores.
+                tch::set_num_threads(1);
                 (f.0)(1, part.0)
             });
             let first = part_grads(0, &parts[0]);
@@ -570,21 +591,18 @@ pub fn diffusion_step(
 type StepPart = (SparseTensor, Tensor, Tensor);
 
 /// The batch `x_t` (and its clean features `x0`, times `t_rows`) cut into
-/// two parts of whole items, the first holding the first half (rounded up);
-/// one part where the batch has a single item.
+/// two parts of whole items ([`SparseGrid::halves`]: the first holds the
+/// first half, rounded up); one part where the batch has a single item.
 fn step_parts(x_t: &SparseTensor, x0: &SparseTensor, t_rows: &Tensor) -> Result<Vec<StepPart>> {
-    let items = x_t.split();
-    if items.len() < 2 {
+    let Some(halves) = x_t.grid.halves() else {
         return Ok(vec![(x_t.clone(), t_rows.shallow_clone(), x0.feats.shallow_clone())]);
-    }
-    let ranges = x_t.grid.batch_ranges();
-    let half = items.len().div_ceil(2);
-    [(0, half), (half, items.len())]
+    };
+    let (n, split) = (x_t.len() as i64, halves.split_row as i64);
+    [(&halves.first, 0, split), (&halves.second, split, n - split)]
         .into_iter()
-        .map(|(lo, hi)| {
-            let (start, end) = (ranges[lo].start as i64, ranges[hi - 1].end as i64);
-            let part = SparseTensor::batch(&items[lo..hi].iter().collect::<Vec<_>>())?;
-            Ok((part, t_rows.narrow(0, start, end - start), x0.feats.narrow(0, start, end - start)))
+        .map(|(grid, start, rows)| {
+            let part = SparseTensor::new(grid.clone(), x_t.feats.narrow(0, start, rows))?;
+            Ok((part, t_rows.narrow(0, start, rows), x0.feats.narrow(0, start, rows)))
         })
         .collect()
 }
@@ -619,6 +637,9 @@ struct ThreadGrant {
     path: Option<PathBuf>,
     level: usize,
     checked: Cell<Instant>,
+    /// The level's cores: the process's libtorch threads at the start, then
+    /// the last grant read.
+    cores: Cell<i32>,
 }
 
 impl ThreadGrant {
@@ -626,7 +647,11 @@ impl ThreadGrant {
         let path = (device == Device::Cpu).then(|| thread_grant_path(out_dir, level));
         // The first poll at the first step.
         let long_ago = Instant::now().checked_sub(Duration::from_secs(2)).unwrap_or_else(Instant::now);
-        ThreadGrant { path, level, checked: Cell::new(long_ago) }
+        ThreadGrant { path, level, checked: Cell::new(long_ago), cores: Cell::new(tch::get_num_threads().max(1)) }
+    }
+
+    fn cores(&self) -> i32 {
+        self.cores.get()
     }
 
     fn poll(&self) {
@@ -637,9 +662,9 @@ impl ThreadGrant {
         self.checked.set(Instant::now());
         let Ok(text) = std::fs::read_to_string(path) else { return };
         match text.trim().parse::<i32>() {
-            Ok(n) if n > 0 && n != tch::get_num_threads() => {
-                log::info!("level {}: {n} libtorch threads from now on (granted: the cores of levels that finished)", self.level);
-                tch::set_num_threads(n);
+            Ok(n) if n > 0 && n != self.cores.get() => {
+                log::info!("level {}: {n} cores from now on (granted: the cores of levels that finished)", self.level);
+                self.cores.set(n);
             }
             _ => {}
         }
