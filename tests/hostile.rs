@@ -13,10 +13,10 @@ fn bin() -> PathBuf {
 }
 
 /// A fixed-seed campaign over every built-in format and two files nobody
-/// here wrote: 6 mutations per input, two children at a time (`make test`).
+/// here wrote: 3 mutations per input, two children at a time (`make test`).
 #[test]
 fn mutated_inputs_end_cleanly_within_bounds() {
-    campaign(17, 6);
+    campaign(17, 3);
 }
 
 /// The same at 30 mutations per input (`make test-slow`, and CI).

@@ -207,35 +207,48 @@ pub fn usd_stage(root: &Path, dirs: &[PathBuf], exemplar: &str, meters_per_unit:
         .and_then(|files| vdb::read_level(&files[0].1).ok())
         .map(|(l, _)| l.frame.up)
         .unwrap_or_default();
-    for dir in dirs {
-        crate::util::interrupt::check()?;
-        let t = std::time::Instant::now();
-        let Some(sampled) = super::stamp::read_stamp(dir, StampOf::Sample) else {
-            log::warn!("{}: its sampling did not finish: not in the USD asset", dir.display());
-            continue;
-        };
-        // The mesh stamp's digest names the mesh's inputs, its time names
-        // this very mesh (a mesh made again from the same inputs by another
-        // program version is a new file the layer must be read from).
-        let mesh_stamp = super::stamp::stamp_path(dir, StampOf::Mesh);
-        let meshed = match (super::stamp::read_stamp(dir, StampOf::Mesh), std::fs::metadata(&mesh_stamp).and_then(|m| m.modified())) {
-            (Some(s), Ok(t)) => format!("{} {:?}", s.digest, t),
-            _ => String::new(),
-        };
-        let d = super::stamp::digest_of(&UsdInputs { sampled: &sampled.digest, meshed: &meshed, meters_per_unit, exemplar, format });
-        if super::stamp::is_done(dir, StampOf::Usd, &d) && dir.join(variant_usd(format)).is_file() {
-            // Reused: its summary is what the layer holds (read cheaply from the stamp's files).
-            variants.push(VariantUsd { path: dir.join(variant_usd(format)), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 });
-            continue;
-        }
-        // A variant pruned to nothing has no layer (a warning); any other
-        // failure (a full disk, an unreadable file) is the step's error.
-        match write_variant(dir, meters_per_unit, exemplar, format)? {
-            Some(v) => {
-                super::stamp::mark_done(dir, StampOf::Usd, &d, t.elapsed().as_secs_f64())?;
-                variants.push(v);
+    // Variants' layers are independent (each reads its own folder's files):
+    // written on every core, told in the variants' order.
+    use rayon::prelude::*;
+    let layers: Vec<Result<Option<VariantUsd>>> = dirs
+        .par_iter()
+        .map(|dir| {
+            crate::util::interrupt::check()?;
+            let t = std::time::Instant::now();
+            let Some(sampled) = super::stamp::read_stamp(dir, StampOf::Sample) else {
+                log::warn!("{}: its sampling did not finish: not in the USD asset", dir.display());
+                return Ok(None);
+            };
+            // The mesh stamp's digest names the mesh's inputs, its time names
+            // this very mesh (a mesh made again from the same inputs by another
+            // program version is a new file the layer must be read from).
+            let mesh_stamp = super::stamp::stamp_path(dir, StampOf::Mesh);
+            let meshed = match (super::stamp::read_stamp(dir, StampOf::Mesh), std::fs::metadata(&mesh_stamp).and_then(|m| m.modified())) {
+                (Some(s), Ok(t)) => format!("{} {:?}", s.digest, t),
+                _ => String::new(),
+            };
+            let d = super::stamp::digest_of(&UsdInputs { sampled: &sampled.digest, meshed: &meshed, meters_per_unit, exemplar, format });
+            if super::stamp::is_done(dir, StampOf::Usd, &d) && dir.join(variant_usd(format)).is_file() {
+                // Reused: its summary is what the layer holds (read cheaply from the stamp's files).
+                return Ok(Some(VariantUsd { path: dir.join(variant_usd(format)), triangles: 0, textured: dir.join(MESH_TEXTURE).is_file(), points: 0, levels: 0 }));
             }
-            None => log::warn!("{}: pruned to nothing: not in the USD asset", dir.display()),
+            // A variant pruned to nothing has no layer (a warning); any other
+            // failure (a full disk, an unreadable file) is the step's error.
+            match write_variant(dir, meters_per_unit, exemplar, format)? {
+                Some(v) => {
+                    super::stamp::mark_done(dir, StampOf::Usd, &d, t.elapsed().as_secs_f64())?;
+                    Ok(Some(v))
+                }
+                None => {
+                    log::warn!("{}: pruned to nothing: not in the USD asset", dir.display());
+                    Ok(None)
+                }
+            }
+        })
+        .collect();
+    for layer in layers {
+        if let Some(v) = layer? {
+            variants.push(v);
         }
     }
     let asset = write_asset(root, dirs, exemplar, up, meters_per_unit, format)?;

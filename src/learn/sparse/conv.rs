@@ -102,7 +102,8 @@ pub fn compute_path(device: tch::Device, want_bf16: bool) -> String {
         (false, _) => " (train.bf16 is off)",
         _ => "",
     };
-    format!("compute: {model}, {} libtorch threads, {isa}{capped}: {products}{why}", tch::get_num_threads())
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    format!("compute: {model} ({cores} cores), {isa}{capped}: {products}{why}")
 }
 
 /// The widest x86 vector instructions the CPU offers, as a user names them.
