@@ -336,6 +336,12 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
 
   // 3b. The function at every marked corner (NaN elsewhere), in parallel;
   //     each thread walks the triangulation with its own copy (own hint).
+  //     A corner on a face shared by two cells takes its value from the cell
+  //     the walk ends in, which depends on where the walk started: each brick
+  //     first locates a point strictly inside a cell (a generic offset from
+  //     its corner), so its walks start from the same cell whichever thread
+  //     ran which bricks before (a mesh made under load differed from the
+  //     same mesh made idle).
   std::vector<float> grid_values(bricks.size() * kBrick3,
                                  std::numeric_limits<float>::quiet_NaN());
   float *values = grid_values.data();
@@ -345,6 +351,10 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
                       PoissonFunction &f = local.local();
                       for (std::size_t b = r.begin(); b != r.end(); ++b) {
                         float *v = values + b * kBrick3;
+                        const double generic = 0.3719;
+                        (void)f(Point(origin[0] + (bricks[b][0] * kBrick + generic) * cell,
+                                      origin[1] + (bricks[b][1] * kBrick + 2 * generic) * cell,
+                                      origin[2] + (bricks[b][2] * kBrick + 3 * generic) * cell));
                         for (int x = 0; x < kBrick; ++x)
                           for (int y = 0; y < kBrick; ++y)
                             for (int z = 0; z < kBrick; ++z) {

@@ -37,7 +37,14 @@ if [ "${BARE_TEST:-0}" = 1 ] && [ -d ../shared ]; then
   mkdir -p "$ROOT/root/shared" && mount --bind -o ro ../shared "$ROOT/root/shared"
 fi
 echo "setup-check: before make setup the chroot has: $(chroot "$ROOT" sh -c 'command -v make g++ cargo rustc python3 ~/.cargo/bin/cargo || true' | tr '\n' ' ')" >&2
-chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb BARE_TEST="${BARE_TEST:-0}" PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin bash -c '
+# The instruction-set caps, where set, go in: an AVX-512 machine held to AVX2
+# (ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2 MKL_ENABLE_INSTRUCTIONS=AVX2)
+# times what an ordinary CPU does.
+isa_caps=()
+for v in ATEN_CPU_CAPABILITY ONEDNN_MAX_CPU_ISA MKL_ENABLE_INSTRUCTIONS; do
+  [ -n "${!v:-}" ] && isa_caps+=("$v=${!v}")
+done
+chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb BARE_TEST="${BARE_TEST:-0}" "${isa_caps[@]}" PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin bash -c '
   set -euo pipefail
   cd /root/shapeshifter
   bare=$(date +%s)
