@@ -389,6 +389,10 @@ async function cancelJob(id) { await attempt('cancel', () => postJson(`/api/jobs
 
 // ---- the gallery and the rest ------------------------------------------------
 const shapeOf = (id) => S.state && S.state.shapes.find((s) => s.id === id);
+// Every string that comes from a run folder or the server goes into markup
+// through this: a flag or name in a shared run's eval.json is text, never
+// markup or script.
+const esc = (x) => String(x).replace(/[&<>"']/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;', "'": '&#39;' }[c]));
 
 function flagsHtml(s) {
   const v = s.verdict;
@@ -398,7 +402,7 @@ function flagsHtml(s) {
   const out = [];
   out.push(v.whole ? '<span class="flag whole">whole</span>' : '<span class="flag">broken</span>');
   if (v.near_copy) out.push('<span class="flag copy">near copy</span>');
-  for (const f of v.flags) if (f !== 'near_copy') out.push(`<span class="flag">${f}</span>`);
+  for (const f of v.flags) if (f !== 'near_copy') out.push(`<span class="flag">${esc(f)}</span>`);
   return out.join('');
 }
 
@@ -409,10 +413,10 @@ function renderGallery() {
     const origin = s.origin.kind === 'session' ? s.origin.made_by : s.origin.kind === 'run' ? 'run variant' : 'the encoded exemplar';
     const finished = s.verdict || s.origin.kind !== 'session';
     const key = `${s.id}:${s.levels.join(',')}:${finished}`;
-    const img = finished && s.levels.length ? `<img alt="${s.id}" src="/api/shapes/${s.id}/preview.png?v=${encodeURIComponent(key)}">` : '';
-    cards.push(`<div class="card${s.id === S.selected || (S.draft && S.selected === S.draft.id && s.id === S.draft.source) ? ' selected' : ''}" data-id="${s.id}">
-      ${img}<div class="name">${s.id}${s.kept_as ? ` → ${s.kept_as}` : ''}</div>
-      <div class="origin">${origin}</div><div>${flagsHtml(s)}</div></div>`);
+    const img = finished && s.levels.length ? `<img alt="${esc(s.id)}" src="/api/shapes/${encodeURIComponent(s.id)}/preview.png?v=${encodeURIComponent(key)}">` : '';
+    cards.push(`<div class="card${s.id === S.selected || (S.draft && S.selected === S.draft.id && s.id === S.draft.source) ? ' selected' : ''}" data-id="${esc(s.id)}">
+      ${img}<div class="name">${esc(s.id)}${s.kept_as ? ` → ${esc(s.kept_as)}` : ''}</div>
+      <div class="origin">${esc(origin)}</div><div>${flagsHtml(s)}</div></div>`);
   }
   const html = cards.join('');
   if (g.dataset.html !== html) {
@@ -424,9 +428,9 @@ function renderGallery() {
 function renderJobs() {
   const el = $('jobs');
   const shown = S.state.jobs.slice(-6);
-  el.innerHTML = shown.map((j) => `<div class="job ${j.state}" data-id="${j.id}" title="${j.message.replace(/"/g, '&quot;')}">
-    ${j.id} ${j.kind} <progress max="1" value="${j.progress}"></progress> ${j.state}${j.state === 'done' ? ` ${j.seconds.toFixed(1)} s` : ''}
-    ${j.state === 'queued' || j.state === 'running' ? `<button data-cancel="${j.id}">cancel</button>` : ''}</div>`).join('');
+  el.innerHTML = shown.map((j) => `<div class="job ${esc(j.state)}" data-id="${esc(j.id)}" title="${esc(j.message)}">
+    ${esc(j.id)} ${esc(j.kind)} <progress max="1" value="${Number(j.progress)}"></progress> ${esc(j.state)}${j.state === 'done' ? ` ${Number(j.seconds).toFixed(1)} s` : ''}
+    ${j.state === 'queued' || j.state === 'running' ? `<button data-cancel="${esc(j.id)}">cancel</button>` : ''}</div>`).join('');
   for (const b of el.querySelectorAll('button[data-cancel]')) b.onclick = () => cancelJob(b.dataset.cancel);
 }
 
@@ -434,12 +438,12 @@ function renderLevels() {
   const s = shapeOf(S.selected);
   const el = $('levels');
   if (S.draft && S.selected === S.draft.id) {
-    el.innerHTML = `<button class="on">edit of level ${S.draft.level}</button>`;
+    el.innerHTML = `<button class="on">edit of level ${esc(S.draft.level)}</button>`;
     $('view-title').textContent = `${S.draft.id} (editing ${S.draft.source})`;
     return;
   }
   if (!s) { el.innerHTML = ''; return; }
-  el.innerHTML = s.levels.map((k) => `<button data-k="${k}" class="${k === S.level ? 'on' : ''}">${S.state.resolutions[k]}³</button>`).join('');
+  el.innerHTML = s.levels.map((k) => `<button data-k="${esc(k)}" class="${k === S.level ? 'on' : ''}">${esc(S.state.resolutions[k])}³</button>`).join('');
   for (const b of el.querySelectorAll('button')) b.onclick = () => { S.follow = false; show(S.selected, parseInt(b.dataset.k, 10)); };
   $('view-title').textContent = s.id;
 }
@@ -460,7 +464,7 @@ function renderShapeInfo() {
 
 function renderSelects() {
   const res = S.state.resolutions, last = res.length - 1;
-  const opts = (max) => res.slice(0, max + 1).map((r, k) => `<option value="${k}">${k} (${r}³)</option>`).join('');
+  const opts = (max) => res.slice(0, max + 1).map((r, k) => `<option value="${k}">${k} (${esc(r)}³)</option>`).join('');
   if ($('keep-level').dataset.n !== String(last)) {
     $('keep-level').innerHTML = opts(last - 1); $('keep-level').value = '1';
     $('edit-level').innerHTML = opts(last - 1); $('edit-level').value = '1';
