@@ -39,6 +39,18 @@ if [ -z "$RUN" ]; then
     --set model.channels=8 --set model.upsampler_channels=8 \
     --set train.level0_iterations=150 --set train.upper_iterations=60 --set train.upsampler_iterations=60 \
     --set 'sample.level0={candidates = 1}' --set 'sample.attempts={count = 1}' --set 'sample.proposers={}' --set sample.level0_steps=20 --set sample.upper_steps=4 > /dev/null
+  # A run folder shared by someone else may hold anything: a flag in its
+  # eval.json that is markup must reach the page as text, not run.
+  export STUDIO_HOSTILE_FLAG='<img src=x onerror="window.__xss=1">'
+  python3 - "$RUN/eval.json" <<'EOF'
+import json, os, sys
+path = sys.argv[1]
+run = json.load(open(path))
+first = run["variants"][0]
+first["structure"] = first.get("structure") or {}
+first["structure"]["flags"] = list(first["structure"].get("flags") or []) + [os.environ["STUDIO_HOSTILE_FLAG"]]
+json.dump(run, open(path, "w"))
+EOF
 fi
 
 "$BIN" studio "$RUN" --port 0 > "$WORK/studio.out" 2> "$WORK/studio.err" &

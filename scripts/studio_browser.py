@@ -63,6 +63,16 @@ try:
     print(f"studio-test: page loaded, {len(cards)} shapes in the gallery")
     if len(cards) < 2:
         fail("the gallery shows no variant")
+    hostile = os.environ.get("STUDIO_HOSTILE_FLAG")
+    if hostile:
+        # A flag of eval.json that is markup: shown as text, and no script ran.
+        wait("the markup flag shown as text", lambda: any(hostile in c.text for c in driver.find_elements(By.CSS_SELECTOR, "#gallery .card")), 30)
+        time.sleep(1.0)  # an injected image's onerror would have fired by now
+        if js("return window.__xss === 1"):
+            fail("a flag from eval.json ran as script in the page")
+        if driver.find_elements(By.CSS_SELECTOR, '#gallery img[src="x"]'):
+            fail("a flag from eval.json became an element of the page")
+        print("studio-test: a flag holding markup in eval.json is shown as text; no script ran")
     webgl = js("const c = document.createElement('canvas'); return !!(c.getContext('webgl2') || c.getContext('webgl'))")
     if not webgl:
         fail("this Chromium gives the page no WebGL")

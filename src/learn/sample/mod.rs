@@ -150,6 +150,7 @@ pub fn sample_observed(
     let nothing_new_in_box = std::cell::Cell::new(false);
     let resized_whole = std::cell::Cell::new(false);
     let box_misses = std::cell::Cell::new((0, 0));
+    let resized_passes = std::cell::Cell::new((0, 0));
     let repairs = crate::level::repair::repairs(exemplar_levels, &sheet_axes, opts.remove_specks, opts.mend_sheets);
     // The proposers start a pass in the exemplar's box: with a box asked for
     // (`--extent`) or a level to continue from, they are off, and said so.
@@ -167,6 +168,7 @@ pub fn sample_observed(
                 nothing_new_in_box.set(false);
                 resized_whole.set(false);
                 box_misses.set((0, 0));
+                resized_passes.set((0, 0));
                 let job = OneVariant {
                     models,
                     exemplar_levels,
@@ -182,6 +184,7 @@ pub fn sample_observed(
                     nothing_new_in_box: &nothing_new_in_box,
                     resized_whole: &resized_whole,
                     box_misses: &box_misses,
+                    resized_passes: &resized_passes,
                     resizing,
                     told: sink.map(|f| (i, f)),
                 };

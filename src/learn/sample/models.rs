@@ -21,10 +21,6 @@ pub struct Models {
     /// level 1's where it is trained: the level-0 choice uses it
     /// ([`AtExtent::thin_ratio`]).
     pub upsamplers: Vec<Option<LevelNet<Upsampler>>>,
-    /// Resized passes these networks made, and how many were whole at the
-    /// structure level: after [`RESIZE_TRIES`] with none whole, they cannot
-    /// fill a longer box and later variants are not resized.
-    pub resized_passes: std::sync::Mutex<(usize, usize)>,
 }
 
 impl Models {
@@ -73,7 +69,7 @@ pub fn load_models(dir: &Path, config: &Config, levels: usize, device: Device) -
         u.load(&p)?;
         upsamplers.push(Some(u));
     }
-    Ok(Models { config: config.clone(), device, diffusion, upsamplers, resized_passes: Default::default() })
+    Ok(Models { config: config.clone(), device, diffusion, upsamplers })
 }
 
 /// Refuses a level whose recorded training parameterisation is not this
@@ -108,5 +104,5 @@ pub fn untrained_models(config: &Config, levels: usize, device: Device, seed: u6
         diffusion.push(new_diffusion(&config.model, l, device)?);
         upsamplers.push(if l == 0 { None } else { Some(new_upsampler(&config.model, device)?) });
     }
-    Ok(Models { config: config.clone(), device, diffusion, upsamplers, resized_passes: Default::default() })
+    Ok(Models { config: config.clone(), device, diffusion, upsamplers })
 }

@@ -60,6 +60,12 @@ pub(super) struct OneVariant<'a> {
     /// [`BOX_COPIES_BEFORE_RESIZE`] or [`BOX_MISSES_BEFORE_RESIZE`] its later
     /// attempts resize.
     pub(super) box_misses: &'a std::cell::Cell<(usize, usize)>,
+    /// This variant's resized passes, and how many were whole at the
+    /// structure level: after [`RESIZE_TRIES`] with none whole its later
+    /// attempts are not resized. Per variant, like every choice of a
+    /// variant: what one variant's passes found never steers another's (a
+    /// shard of variants writes what one run writes).
+    pub(super) resized_passes: &'a std::cell::Cell<(usize, usize)>,
     /// Whether a pass whose level-0 candidates are none new enough is
     /// resized (`resize_max`, not bent, the novel pick in the exemplar's box).
     pub(super) resizing: bool,
@@ -224,10 +230,10 @@ impl OneVariant<'_> {
     }
 
     /// Whether a pass with nothing new at level 0 is resized: resizing is on
-    /// and these networks have not failed [`RESIZE_TRIES`] times with no
-    /// whole resized pass.
+    /// and this variant's resized passes have not failed [`RESIZE_TRIES`]
+    /// times with none whole.
     fn resizes(&self) -> bool {
-        let (passes, whole) = *self.models.resized_passes.lock().unwrap_or_else(|e| e.into_inner());
+        let (passes, whole) = self.resized_passes.get();
         self.resizing && (whole > 0 || passes < RESIZE_TRIES)
     }
 
@@ -305,10 +311,11 @@ impl OneVariant<'_> {
             }
             if p.resized.is_some() {
                 self.resized_whole.set(self.resized_whole.get() || rank.whole);
-                let mut record = self.models.resized_passes.lock().unwrap_or_else(|e| e.into_inner());
-                *record = (record.0 + 1, record.1 + rank.whole as usize);
+                let (passes, whole) = self.resized_passes.get();
+                let record = (passes + 1, whole + rank.whole as usize);
+                self.resized_passes.set(record);
                 if record.0 == RESIZE_TRIES && record.1 == 0 {
-                    log::warn!("{RESIZE_TRIES} resized passes, none whole: these networks cannot fill a longer box; variants stay in the exemplar's box");
+                    log::warn!("{RESIZE_TRIES} resized passes of this variant, none whole: its later attempts stay in the exemplar's box");
                 }
             }
             // Once resizing has failed, the networks offer nothing new in any
