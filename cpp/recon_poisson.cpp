@@ -340,8 +340,7 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
   //     the walk ends in, which depends on where the walk started: each brick
   //     first locates a point strictly inside a cell (a generic offset from
   //     its corner), so its walks start from the same cell whichever thread
-  //     ran which bricks before (a mesh made under load differed from the
-  //     same mesh made idle).
+  //     ran which bricks before.
   std::vector<float> grid_values(bricks.size() * kBrick3,
                                  std::numeric_limits<float>::quiet_NaN());
   float *values = grid_values.data();
