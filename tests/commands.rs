@@ -705,7 +705,17 @@ fn quiet_or_not_every_command_writes_the_same_files() {
                     assert_eq!((x.coords, x.offsets, x.normals, x.colours, x.mask), (y.coords, y.offsets, y.normals, y.colours, y.mask), "{name}: {rel}");
                 }
                 "vdb" => {}
-                _ => assert!(std::fs::read(&pa).unwrap() == std::fs::read(&pb).unwrap(), "{name}: {rel} differs with -q"),
+                _ => {
+                    if std::fs::read(&pa).unwrap() != std::fs::read(&pb).unwrap() {
+                        // Kept for a look: the two files, beside the test binary's scratch folder.
+                        let keep = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("quiet-or-not").join(name);
+                        let _ = std::fs::create_dir_all(&keep);
+                        let _ = std::fs::copy(&pa, keep.join(format!("loud-{}", rel.replace('/', "_"))));
+                        let _ = std::fs::copy(&pb, keep.join(format!("quiet-{}", rel.replace('/', "_"))));
+                        let _ = std::fs::copy(&level, keep.join("input-level_2.vdb"));
+                        panic!("{name}: {rel} differs with -q (both kept in {})", keep.display());
+                    }
+                }
             }
         }
     }
