@@ -51,7 +51,6 @@ impl OneThread {
         }
         OneThread(before)
     }
-
 }
 
 impl Drop for OneThread {

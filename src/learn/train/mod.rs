@@ -501,15 +501,16 @@ pub struct StepSeeds {
 /// noise (drawn from `noise_seed` alone, not from libtorch's global
 /// generator), forward, MSE to x0, backward, clipped step; returns the loss.
 ///
-/// The batch's items are cut into two parts (where it has two or more),
-/// each with its own forward and backward pass and its own dropout masks
-/// (drawn from `dropout_seed` and the part); the parts' gradients are
-/// added, part 0's first, and the step is taken once. With two or more
+/// On the CPU the batch's items are cut into two parts (where it has two or
+/// more), each with its own forward and backward pass and its own dropout
+/// masks (drawn from `dropout_seed` and the part); the parts' gradients
+/// are added, part 0's first, and the step is taken once. With
 /// `side_by_side` (a level that has two cores: it trains alone, or was
 /// granted the cores of levels that finished) the parts run on two threads
 /// at once, each on one libtorch thread; else one after the other. Either
 /// way every operation sees the same rows in the same order, so the
-/// weights are the same bits whatever the thread count.
+/// weights are the same bits whatever the thread count. A CUDA device
+/// takes the whole batch at once, its dropout from libtorch's generator.
 #[allow(clippy::too_many_arguments)]
 pub fn diffusion_step(
     net: &DiffusionNet,
@@ -533,15 +534,16 @@ pub fn diffusion_step(
     // weights depended on the thread count (and a run on its granted cores,
     // `thread_grant_path`, differed from its resumed or staged twin). The
     // cores are used by running the parts side by side instead.
-    let one = (x0.feats.device() == Device::Cpu).then(crate::learn::OneThread::new);
-    let parts = step_parts(&x_t, x0, t_rows)?;
+    let cpu = x0.feats.device() == Device::Cpu;
+    let one = cpu.then(crate::learn::OneThread::new);
+    let parts = step_parts(&x_t, x0, t_rows, cpu)?;
     // Each part's loss is its share of the whole batch's mean square error.
     let elements = (size[0] * size[1]).max(1) as f64;
     let weights = opt.weights();
     let bf16 = crate::learn::sparse::bf16_compute();
     let part_grads = |i: usize, (x_t, t, target): &StepPart| -> Result<(Vec<Tensor>, f64)> {
         let _bf16 = crate::learn::sparse::bf16_compute_scope(bf16);
-        let _dropout = crate::learn::sparse::dropout_stream_scope(Rng::new(dropout_seed ^ (i as u64 + 1)).next_u64());
+        let _dropout = cpu.then(|| crate::learn::sparse::dropout_stream_scope(Rng::new(dropout_seed ^ (i as u64 + 1)).next_u64()));
         let pred = net.forward_t(x_t, t, true)?;
         let loss = (&pred.feats - target).square().sum(Kind::Float) / elements;
         let grads = Tensor::run_backward(&[&loss], &weights, false, false);
@@ -592,9 +594,10 @@ type StepPart = (SparseTensor, Tensor, Tensor);
 
 /// The batch `x_t` (and its clean features `x0`, times `t_rows`) cut into
 /// two parts of whole items ([`SparseGrid::halves`]: the first holds the
-/// first half, rounded up); one part where the batch has a single item.
-fn step_parts(x_t: &SparseTensor, x0: &SparseTensor, t_rows: &Tensor) -> Result<Vec<StepPart>> {
-    let Some(halves) = x_t.grid.halves() else {
+/// first half, rounded up) where `split`; one part where not, or where the
+/// batch has a single item.
+fn step_parts(x_t: &SparseTensor, x0: &SparseTensor, t_rows: &Tensor, split: bool) -> Result<Vec<StepPart>> {
+    let Some(halves) = x_t.grid.halves().filter(|_| split) else {
         return Ok(vec![(x_t.clone(), t_rows.shallow_clone(), x0.feats.shallow_clone())]);
     };
     let (n, split) = (x_t.len() as i64, halves.split_row as i64);
