@@ -28,6 +28,8 @@
 // NDEBUG and CGAL_DEBUG come from build.rs for every translation unit: Eigen
 // and Boost without their debug assertions, CGAL's preconditions kept (they
 // throw, and the bridge turns that into an error).
+// First: CGAL's containers take the allocator it defines (see there why).
+#include "shapeshifter/cpp/cgal_arena.h"
 #include "shapeshifter/cpp/recon_poisson.h"
 #include "shapeshifter/src/io/ffi.rs.h"
 
@@ -195,6 +197,9 @@ PoissonGrid poisson_grid(rust::Slice<const float> points, rust::Slice<const floa
   if (!(params.grid_cell > 0.0) || !std::isfinite(params.grid_cell))
     throw std::runtime_error("poisson: grid_cell must be positive, got " +
                              std::to_string(params.grid_cell));
+  // Before the function: its triangulation lives in the arena, and goes
+  // before the arena does.
+  const cgal_arena::Scope arena;
   PoissonGrid out;
   PoissonStats &stats = out.stats;
   const auto function = implicit_function(points, normals, params, stats);
