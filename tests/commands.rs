@@ -144,6 +144,47 @@ fn sample_takes_a_run_folder_and_a_failed_sample_leaves_no_folder() {
     assert!(!failed.exists(), "a failed sample left {}: {:?}", failed.display(), listing(&failed));
 }
 
+/// A variant's choices depend only on the run seed, its index, the models and
+/// the exemplar. The tiny networks fill no longer box whole, so every variant
+/// tries resized passes, they all fail, and after six the variant stays in
+/// the exemplar's box: one process sampling both variants and two processes
+/// sampling one each at the same time write the same variants, voxel for
+/// voxel (the count of failed passes once lived in the process and steered
+/// the variants after it).
+#[test]
+fn failing_resized_passes_steer_no_other_variant() {
+    let run = tiny_trained_run();
+    let dir = tempfile::tempdir().unwrap();
+    let settings = [
+        "--set", "sample.level0={candidates = 2, pick = \"novel\"}", "--set", "sample.attempts={count = 9}",
+        "--set", "sample.proposers={resize_max = 1.5}", "--set", "sample.level0_steps=10", "--set", "sample.upper_steps=2",
+    ];
+    let sample = |out: &std::path::Path, first: &str, n: &str| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_shapeshifter"));
+        c.args(["sample", run.to_str().unwrap(), "--seed", "4", "--progress", "none", "--first", first, "-n", n, "-o", out.to_str().unwrap()]);
+        c.args(settings);
+        c
+    };
+    let one = dir.path().join("one");
+    let o = sample(&one, "0", "2").output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let gave_up = stderr(&o).matches("resized passes of this variant, none whole").count();
+    assert_eq!(gave_up, 2, "each variant's resized passes all fail here: {}", stderr(&o));
+    // Two processes at once, one variant each.
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let children = [sample(&a, "0", "1").stderr(std::process::Stdio::piped()).spawn().unwrap(), sample(&b, "1", "1").stderr(std::process::Stdio::piped()).spawn().unwrap()];
+    for child in children {
+        let o = child.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let two = dir.path().join("two");
+    std::fs::create_dir(&two).unwrap();
+    std::fs::rename(a.join("variant_000"), two.join("variant_000")).unwrap();
+    std::fs::rename(b.join("variant_001"), two.join("variant_001")).unwrap();
+    let o = shapeshifter(&["compare", one.to_str().unwrap(), two.to_str().unwrap()]);
+    assert!(o.status.success() && stdout(&o).contains("identical"), "one process and two differ: {}", stdout(&o));
+}
+
 #[test]
 fn a_resized_variant_records_its_extent_and_eval_judges_it_at_that_extent() {
     let run = tiny_trained_run();
