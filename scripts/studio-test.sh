@@ -58,7 +58,8 @@ STUDIO_PID=$!
 for _ in $(seq 100); do grep -q '^studio: ' "$WORK/studio.out" 2> /dev/null && break; sleep 0.1; done
 URL=$(sed -n 's/^studio: //p' "$WORK/studio.out")
 [ -n "$URL" ] || { echo "studio-test: the studio printed no address:" >&2; cat "$WORK/studio.err" >&2; exit 1; }
-SHAPESHIFTER=$BIN "$VENV/bin/python" "$ROOT/scripts/studio_browser.py" "$URL" "$RUN" "$OUT/studio_screenshot.png" || {
+# The address holds the token: given in the environment, not on a command line.
+STUDIO_URL=$URL SHAPESHIFTER=$BIN "$VENV/bin/python" "$ROOT/scripts/studio_browser.py" "$RUN" "$OUT/studio_screenshot.png" || {
   echo "studio-test: the studio's log:" >&2; tail -20 "$WORK/studio.err" >&2; exit 1; }
 # SIGTERM ends it within seconds, 143.
 kill -TERM "$STUDIO_PID"

@@ -5,7 +5,9 @@ regenerate the finer levels, keep the result. Checks what the page shows and
 what the run folder holds after, saves a screenshot of the page, and prints
 the page's own timings (edit -> each level on screen).
 
-usage: studio_browser.py URL RUN_DIR SCREENSHOT.png
+usage: STUDIO_URL=URL studio_browser.py RUN_DIR SCREENSHOT.png
+(the address holds the session's token: it is not put on a command line,
+where any user of the machine could read it)
 """
 import json
 import os
@@ -19,7 +21,8 @@ from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.by import By
 from selenium.webdriver.common.keys import Keys
 
-URL, RUN, SHOT = sys.argv[1], sys.argv[2], sys.argv[3]
+URL = os.environ["STUDIO_URL"]
+RUN, SHOT = sys.argv[1], sys.argv[2]
 BIN = os.environ.get("SHAPESHIFTER", "target/release/shapeshifter")
 
 
@@ -56,6 +59,18 @@ try:
     # Load: the page, the networks, the gallery.
     driver.get(URL)
     wait("the page to load", lambda: js("return document.body.dataset.loaded") == "1", 60)
+    # The token leaves the address bar once the page has its cookie.
+    if "token=" in driver.current_url:
+        fail(f"the token stays in the address bar: {driver.current_url}")
+    # The Content-Security-Policy: the page itself breaks none of it (its
+    # import map and scripts load), and a script put into the page as markup
+    # does not run.
+    js("window.__violations = []; document.addEventListener('securitypolicyviolation', (e) => window.__violations.push(e.violatedDirective + ' ' + e.blockedURI));")
+    js("const s = document.createElement('script'); s.textContent = 'window.__inline = 1'; document.body.appendChild(s);")
+    time.sleep(0.3)
+    if js("return window.__inline === 1"):
+        fail("an inline script ran: the page has no Content-Security-Policy")
+    print("studio-test: the token left the address bar; an inline script put into the page was blocked by its policy")
     wait("the networks", lambda: state()["ready"], 120)
     if state().get("load_error"):
         fail(f"networks: {state()['load_error']}")
@@ -138,6 +153,10 @@ try:
     if counts[0] < 200 or counts[1] < 200:
         fail(f"the 3D view is blank: {counts}")
     driver.save_screenshot(SHOT)
+    # Only the probe above was blocked: the page's own work broke no rule.
+    violations = [v for v in js("return window.__violations") if not v.startswith("script-src-elem inline")]
+    if violations:
+        fail(f"the page broke its own Content-Security-Policy: {violations}")
     print(f"studio-test: screenshot {SHOT}")
 
     # Keep: a variant folder in the run, meshed, in the USD asset and eval.json.

@@ -21,6 +21,10 @@ pub enum Error {
     /// stopped between steps and wrote nothing.
     #[error("cancelled")]
     Cancelled,
+    /// Over a bound of what a long-lived process holds (the studio's queue,
+    /// its open drafts): nothing was taken; ask again when some is done.
+    #[error("{0}")]
+    Busy(String),
     #[error(transparent)]
     Torch(#[from] tch::TchError),
     /// A stage's own error (encoding, rendering, the sparse grid and

@@ -142,6 +142,34 @@ fn the_studio_answers_only_its_token_and_loopback_and_refuses_bad_requests_with_
     // DNS rebinding: another name for 127.0.0.1 is refused, token or not.
     let (status, body) = s.request("GET", state_path, None, &[("X-Studio-Token", &s.token), ("Host", "attacker.example")]);
     assert_eq!(status, 403, "{}", String::from_utf8_lossy(&body));
+    // What another site's page could send without asking: a POST as
+    // text/plain or a form, or one from another Origin; 403, nothing made.
+    let new_draft = r#"{"source": "variant_000", "level": 1}"#;
+    for (content_type, origin) in [
+        ("text/plain", None),
+        ("application/x-www-form-urlencoded", None),
+        ("application/json", Some("http://attacker.example")),
+        ("application/json", Some("http://127.0.0.1:1")),
+        ("application/json", Some("null")),
+    ] {
+        let mut headers = vec![("X-Studio-Token", s.token.as_str())];
+        if let Some(o) = origin {
+            headers.push(("Origin", o));
+        }
+        let (status, body) = crate::common::http::request(&s.base, "POST", "/api/drafts", Some((content_type, new_draft.as_bytes())), &headers);
+        assert_eq!(status, 403, "{content_type} from {origin:?}: {}", String::from_utf8_lossy(&body));
+    }
+    assert_eq!(s.get(state_path).1["drafts"], json!([]), "a refused POST made a draft");
+    // From the page's own origin the request reaches its route (which finds
+    // no such variant: 404, not 403).
+    let own = format!("http://127.0.0.1:{port}");
+    let missing = r#"{"source": "variant_042", "level": 1}"#;
+    let (status, body) = crate::common::http::request(&s.base, "POST", "/api/drafts", Some(("application/json; charset=utf-8", missing.as_bytes())), &[("X-Studio-Token", &s.token), ("Origin", &own)]);
+    assert_eq!(status, 404, "{}", String::from_utf8_lossy(&body));
+    // The page holds no token, and no script runs but the studio's own files.
+    assert!(!String::from_utf8_lossy(&page).contains(&s.token), "the token is in the page");
+    let policy = crate::common::http::response_header(&s.base, &format!("/?token={}", s.token), "Content-Security-Policy").unwrap_or_default();
+    assert!(policy.contains("default-src 'none'") && policy.contains("script-src 'self' 'sha256-") && !policy.contains("unsafe"), "{policy}");
     // Nothing served by path: traversal finds no route.
     for p in ["/assets/../config.toml", "/api/shapes/..%2fconfig.toml/preview.png", "/config.toml"] {
         let (status, v) = s.get(p);
@@ -207,6 +235,45 @@ fn the_studio_answers_only_its_token_and_loopback_and_refuses_bad_requests_with_
     });
     assert!(answered.iter().all(|&c| c == 200), "{answered:?}");
     eprintln!("50 concurrent requests answered in {:.2} s", t.elapsed().as_secs_f64());
+
+    // Bounds: drafts and queued jobs past their number get 429 and one
+    // line; finished jobs beyond those listed are forgotten.
+    let mut made = Vec::new();
+    let refused = loop {
+        let (status, v) = s.post("/api/drafts", json!({"source": "variant_000", "level": 1}));
+        if status != 200 {
+            break (status, v);
+        }
+        made.push(v["id"].as_str().unwrap().to_string());
+        assert!(made.len() <= 64, "drafts are not bounded");
+    };
+    assert_eq!(refused.0, 429, "{}", refused.1);
+    assert!(error_line(&refused.1).contains("discard one first"), "{}", refused.1);
+    for d in &made {
+        assert_eq!(s.post(&format!("/api/drafts/{d}/discard"), json!({})).0, 200);
+    }
+    let mut asked = Vec::new();
+    let refused = loop {
+        let (status, v) = s.post("/api/jobs", json!({"kind": "sample", "n": 1, "seed": 1}));
+        if status != 202 {
+            break (status, v);
+        }
+        asked.push(v["id"].as_str().unwrap().to_string());
+        assert!(asked.len() <= 100, "the queue is not bounded");
+    };
+    assert_eq!(refused.0, 429, "{}", refused.1);
+    assert!(error_line(&refused.1).contains("jobs are waiting already"), "{}", refused.1);
+    for j in &asked {
+        s.post(&format!("/api/jobs/{j}/cancel"), json!({}));
+    }
+    for j in &asked {
+        s.finish(j);
+    }
+    let (status, v) = s.post("/api/jobs", json!({"kind": "sample", "n": 1, "seed": 1}));
+    assert_eq!(status, 202, "a queue that emptied takes jobs again: {v}");
+    s.post(&format!("/api/jobs/{}/cancel", v["id"].as_str().unwrap()), json!({}));
+    let listed = s.get(state_path).1["jobs"].as_array().unwrap().len();
+    assert!(listed <= 33, "{listed} jobs listed: finished ones are not pruned");
 
     // A folder that is not a trained run: exit 2, one line, nothing written.
     let empty = tempfile::tempdir().unwrap();

@@ -2,9 +2,32 @@
 //! offline and fetches nothing at run time. three.js (MIT, its LICENSE
 //! beside it) is vendored from npm by `scripts/vendor-three.sh`.
 
-/// The page, with the session token for its requests.
-pub fn page(token: &str) -> String {
-    include_str!("page/index.html").replace("{{TOKEN}}", token)
+/// The page. It holds no token: its requests carry the studio's cookie,
+/// which its scripts cannot read (HttpOnly).
+pub fn page() -> &'static str {
+    include_str!("page/index.html")
+}
+
+/// The page's inline scripts (its import map), as the Content-Security-Policy
+/// hashes them: the text between the tags.
+pub fn inline_scripts() -> Vec<&'static str> {
+    let mut out = Vec::new();
+    let mut rest = page();
+    while let Some(at) = rest.find("<script") {
+        let tag_end = at + rest[at..].find('>').map_or(rest.len() - at, |e| e + 1);
+        let tag = &rest[at..tag_end];
+        let close = rest[tag_end..].find("</script>").map_or(rest.len(), |c| tag_end + c);
+        if !tag.contains(" src=") {
+            out.push(&rest[tag_end..close]);
+        }
+        rest = &rest[close..];
+        if let Some(r) = rest.strip_prefix("</script>") {
+            rest = r;
+        } else {
+            break;
+        }
+    }
+    out
 }
 
 /// An asset by name: its content type and bytes.

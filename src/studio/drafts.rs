@@ -15,6 +15,9 @@ use super::shapes::SeedOf;
 
 /// Edits kept for undo per draft; older ones are forgotten.
 pub const MAX_HISTORY: usize = 100;
+/// Drafts open at once at most: each holds up to [`MAX_HISTORY`] + 1 copies
+/// of its level (a 32^3 level is a few hundred KB).
+pub const MAX_DRAFTS: usize = 16;
 
 /// An edit as the page sends it. Boxes are inclusive voxel coordinates of
 /// the draft's level, `min` and `max` in any order.

@@ -3,7 +3,9 @@
 //! then a cookie the page gets, or an `X-Studio-Token` header), a Host header
 //! other than localhost or 127.0.0.1 is refused (DNS rebinding), and only
 //! the routes below answer: nothing is served by path from the disk, so
-//! nothing outside the run folder can be reached. A bad request gets a 4xx
+//! nothing outside the run folder can be reached. A request that changes
+//! something is JSON from the studio's own page ([`change_refused`]); every
+//! answer carries a strict Content-Security-Policy. A bad request gets a 4xx
 //! with a one-line message and changes nothing.
 
 use std::io::{Cursor, Read};
@@ -124,12 +126,13 @@ impl Reply {
 }
 
 /// The status for a library error: unknown ids 404, the rest of the user's
-/// mistakes 400, a stop 503.
+/// mistakes 400, a full queue or too many drafts 429, a stop 503.
 fn status_of(e: &Error) -> u16 {
     match e {
         _ if is_unknown(e) => 404,
         Error::Invalid(_) | Error::Usage(_) => 400,
         Error::Stopped(_) => 503,
+        Error::Busy(_) => 429,
         _ => 500,
     }
 }
@@ -178,11 +181,56 @@ fn same(a: &str, b: &str) -> bool {
     a.len() == b.len() && a.bytes().zip(b.bytes()).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
+/// Why a request that changes something is refused, if it is: it must say
+/// its body is JSON (a form or `text/plain` POST is what another site's page
+/// can send without asking), and where it names the page it came from
+/// (`Origin`, which browsers send with every POST), that page must be this
+/// studio's.
+fn change_refused(request: &Request, port: u16) -> Option<&'static str> {
+    if *request.method() != Method::Post {
+        return None;
+    }
+    let json = header(request, "Content-Type")
+        .is_some_and(|t| t.split(';').next().is_some_and(|m| m.trim().eq_ignore_ascii_case("application/json")));
+    if !json {
+        return Some("a request that changes something must send its body as application/json");
+    }
+    let origin_ok = header(request, "Origin").is_none_or(|o| {
+        o.strip_prefix("http://").is_some_and(|host| !host.contains('/') && host.contains(':') && host_allowed(Some(host), port))
+    });
+    (!origin_ok).then_some("a request from a page other than this studio's is refused (Origin)")
+}
+
+/// The Content-Security-Policy of every answer: scripts and styles only
+/// from the studio's own files (and the page's one inline import map, by its
+/// hash), data only from the studio, no plugins, forms, frames or base URL.
+/// A string from a run folder that reached the page as markup still could
+/// not run.
+fn content_security_policy() -> &'static str {
+    static POLICY: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    POLICY.get_or_init(|| {
+        let scripts: String = super::assets::inline_scripts()
+            .iter()
+            .map(|s| {
+                use base64::Engine as _;
+                use sha2::Digest as _;
+                format!(" 'sha256-{}'", base64::engine::general_purpose::STANDARD.encode(sha2::Sha256::digest(s.as_bytes())))
+            })
+            .collect();
+        format!(
+            "default-src 'none'; script-src 'self'{scripts}; style-src 'self'; img-src 'self' blob: data:; \
+             connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+        )
+    })
+}
+
 fn answer(studio: &Studio, token: &str, port: u16, mut request: Request) {
     let reply = if !host_allowed(header(&request, "Host"), port) {
         Reply::error(403, "this studio answers only requests addressed to localhost or 127.0.0.1")
     } else if !token_of(&request, port).is_some_and(|t| same(&t, token)) {
         Reply::error(403, "missing or wrong token: open the address the studio printed (with its ?token=)")
+    } else if let Some(why) = change_refused(&request, port) {
+        Reply::error(403, why)
     } else {
         let body = read_body(&mut request);
         match body {
@@ -199,7 +247,9 @@ fn answer(studio: &Studio, token: &str, port: u16, mut request: Request) {
     )
     .with_header(Header::from_bytes("Content-Type", reply.content_type).expect("a valid header"))
     .with_header(Header::from_bytes("Cache-Control", "no-store").expect("a valid header"))
-    .with_header(Header::from_bytes("X-Content-Type-Options", "nosniff").expect("a valid header"));
+    .with_header(Header::from_bytes("X-Content-Type-Options", "nosniff").expect("a valid header"))
+    .with_header(Header::from_bytes("Content-Security-Policy", content_security_policy()).expect("a valid header"))
+    .with_header(Header::from_bytes("Referrer-Policy", "no-referrer").expect("a valid header"));
     for (k, v) in &reply.headers {
         if let Ok(h) = Header::from_bytes(k.as_bytes(), v.as_bytes()) {
             response = response.with_header(h);
@@ -232,7 +282,7 @@ fn route(studio: &Studio, request: &Request, body: &[u8], token: &str, port: u16
     let post = *request.method() == Method::Post;
     match (parts.as_slice(), get, post) {
         ([], true, _) | (["index.html"], true, _) => {
-            let mut r = Reply::bytes("text/html; charset=utf-8", super::assets::page(token).into_bytes());
+            let mut r = Reply::bytes("text/html; charset=utf-8", super::assets::page().as_bytes().to_vec());
             // The page's own requests (scripts, data) carry the token as a
             // cookie of this port, never sent to another site.
             r.headers.push(("Set-Cookie".into(), format!("{}={token}; Path=/; HttpOnly; SameSite=Strict", cookie_name(port))));
@@ -312,6 +362,14 @@ mod tests {
         assert!(!host_allowed(Some("127.0.0.1.evil.example:8080"), 8080));
         assert!(!host_allowed(Some("localhost.:8080"), 8080));
         assert!(!host_allowed(None, 8080));
+    }
+
+    #[test]
+    fn the_policy_allows_the_pages_import_map_by_its_hash_and_nothing_inline_else() {
+        let policy = content_security_policy();
+        assert_eq!(policy.matches("'sha256-").count(), 1, "{policy}");
+        assert!(policy.starts_with("default-src 'none'; script-src 'self' 'sha256-"), "{policy}");
+        assert!(!policy.contains("unsafe"), "{policy}");
     }
 
     #[test]

@@ -100,6 +100,13 @@ pub struct JobStatus {
     asked: Instant,
 }
 
+/// Jobs waiting to start at most (a job is seconds to minutes of work: more
+/// than this queued is a script gone wrong, not a person).
+pub const MAX_QUEUED: usize = 32;
+/// Finished jobs the studio still lists (the page polls the list): older
+/// ones are forgotten, their outputs stay in the gallery.
+pub const FINISHED_LISTED: usize = 32;
+
 /// Jobs asked for and not started.
 #[derive(Default)]
 struct Queue {
@@ -142,8 +149,22 @@ impl Jobs {
                 return Ok(id.clone());
             }
         }
+        if queue.items.len() >= MAX_QUEUED {
+            return Err(Error::Busy(format!("{MAX_QUEUED} jobs are waiting already: ask again when some have run (or cancel some)")));
+        }
         let id = self.ids.next();
-        self.lock().push(JobStatus {
+        let mut status = self.lock();
+        // The oldest finished jobs beyond the listed number are forgotten.
+        let finished = status.iter().filter(|j| j.finished()).count();
+        if finished >= FINISHED_LISTED {
+            let mut drop = finished + 1 - FINISHED_LISTED;
+            status.retain(|j| {
+                let forget = drop > 0 && j.finished();
+                drop -= forget as usize;
+                !forget
+            });
+        }
+        status.push(JobStatus {
             id: id.clone(),
             kind: work.kind(),
             state: JobState::Queued,
@@ -156,6 +177,7 @@ impl Jobs {
             cancel: Arc::new(AtomicBool::new(false)),
             asked: Instant::now(),
         });
+        drop(status);
         queue.items.push_back((id.clone(), work));
         drop(queue);
         self.available.notify_all();

@@ -210,9 +210,13 @@ impl Studio {
         }
         let l = self.gallery.level(source, level)?;
         let seed = self.gallery.with(source, |s| Ok(s.seed))?;
+        let mut drafts = self.lock_drafts();
+        if drafts.len() >= drafts::MAX_DRAFTS {
+            return Err(Error::Busy(format!("{} drafts are open: discard one first", drafts::MAX_DRAFTS)));
+        }
         let draft = Draft::new(self.draft_ids.next(), source.to_string(), seed, (*l).clone());
         let summary = draft.summary();
-        self.lock_drafts().push(draft);
+        drafts.push(draft);
         Ok(summary)
     }
 

@@ -14,6 +14,18 @@ use std::time::Duration;
 /// `base` is `http://HOST:PORT`; `path` starts with `/`. The status and the
 /// body; panics on a broken connection (a test failure, with what was asked).
 pub fn request(base: &str, method: &str, path: &str, body: Option<(&str, &[u8])>, headers: &[(&str, &str)]) -> (u16, Vec<u8>) {
+    let (status, _, body) = exchange(base, method, path, body, headers);
+    (status, body)
+}
+
+/// The value of header `name` in the answer to `GET path` (no other header sent).
+pub fn response_header(base: &str, path: &str, name: &str) -> Option<String> {
+    let (_, headers, _) = exchange(base, "GET", path, None, &[]);
+    headers.into_iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v)
+}
+
+/// [`request`], with the answer's headers.
+fn exchange(base: &str, method: &str, path: &str, body: Option<(&str, &[u8])>, headers: &[(&str, &str)]) -> (u16, Vec<(String, String)>, Vec<u8>) {
     let authority = base.strip_prefix("http://").unwrap_or(base);
     let mut stream = TcpStream::connect(authority).unwrap_or_else(|e| panic!("{method} {path}: connect {authority}: {e}"));
     stream.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
@@ -36,12 +48,12 @@ pub fn request(base: &str, method: &str, path: &str, body: Option<(&str, &[u8])>
     read_response(stream).unwrap_or_else(|e| panic!("{method} {path}: {e}"))
 }
 
-fn read_response(stream: TcpStream) -> Result<(u16, Vec<u8>), String> {
+fn read_response(stream: TcpStream) -> Result<(u16, Vec<(String, String)>, Vec<u8>), String> {
     let mut r = BufReader::new(stream);
     let mut line = String::new();
     r.read_line(&mut line).map_err(|e| format!("status line: {e}"))?;
     let status: u16 = line.split_whitespace().nth(1).and_then(|s| s.parse().ok()).ok_or_else(|| format!("bad status line {line:?}"))?;
-    let (mut length, mut chunked) = (None, false);
+    let (mut length, mut chunked, mut headers) = (None, false, Vec::new());
     loop {
         line.clear();
         r.read_line(&mut line).map_err(|e| format!("header: {e}"))?;
@@ -51,6 +63,7 @@ fn read_response(stream: TcpStream) -> Result<(u16, Vec<u8>), String> {
         }
         if let Some((k, v)) = l.split_once(':') {
             let v = v.trim();
+            headers.push((k.trim().to_string(), v.to_string()));
             if k.eq_ignore_ascii_case("content-length") {
                 length = v.parse::<usize>().ok();
             } else if k.eq_ignore_ascii_case("transfer-encoding") && v.to_ascii_lowercase().contains("chunked") {
@@ -79,5 +92,5 @@ fn read_response(stream: TcpStream) -> Result<(u16, Vec<u8>), String> {
     } else {
         r.read_to_end(&mut body).map_err(|e| format!("body: {e}"))?;
     }
-    Ok((status, body))
+    Ok((status, headers, body))
 }

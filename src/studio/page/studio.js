@@ -5,14 +5,16 @@ import * as THREE from 'three';
 import { OrbitControls } from '/assets/OrbitControls.js';
 import { PLYLoader } from '/assets/PLYLoader.js';
 
-const TOKEN = document.body.dataset.token;
 const $ = (id) => document.getElementById(id);
+// The token stays out of the address bar (and the history, and a shared
+// screenshot): the studio's cookie, which no script can read, carries it.
+if (new URLSearchParams(location.search).has('token')) history.replaceState(null, '', location.pathname);
 
 // ---- server calls ----------------------------------------------------------
 async function call(method, path, body) {
   const r = await fetch(path, {
     method,
-    headers: { 'X-Studio-Token': TOKEN, ...(body ? { 'Content-Type': 'application/json' } : {}) },
+    headers: body ? { 'Content-Type': 'application/json' } : {},
     body: body ? JSON.stringify(body) : undefined,
   });
   if (!r.ok) {
