@@ -37,15 +37,31 @@ struct Studio {
 
 impl Studio {
     fn start() -> Studio {
+        Studio::start_with_files(None)
+    }
+
+    /// A studio that may open at most `files` file descriptors (its
+    /// RLIMIT_NOFILE), where given.
+    fn start_with_files(files: Option<u64>) -> Studio {
         let dir = tempfile::tempdir().unwrap();
         let run = dir.path().join("run");
         copy_dir(tiny_trained_run(), &run);
-        let mut child = Command::new(env!("CARGO_BIN_EXE_shapeshifter"))
-            .args(["studio", run.to_str().unwrap(), "--port", "0"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut command = Command::new(env!("CARGO_BIN_EXE_shapeshifter"));
+        command.args(["studio", run.to_str().unwrap(), "--port", "0"]).stdout(Stdio::piped()).stderr(Stdio::null());
+        if let Some(n) = files {
+            use std::os::unix::process::CommandExt;
+            // SAFETY: setrlimit is async-signal-safe; nothing else runs between fork and exec.
+            unsafe {
+                command.pre_exec(move || {
+                    let limit = libc::rlimit { rlim_cur: n, rlim_max: n };
+                    if libc::setrlimit(libc::RLIMIT_NOFILE, &limit) != 0 {
+                        return Err(std::io::Error::last_os_error());
+                    }
+                    Ok(())
+                });
+            }
+        }
+        let mut child = command.spawn().unwrap();
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
         let url = line.trim().strip_prefix("studio: ").unwrap_or_else(|| panic!("no address printed: {line}")).to_string();
@@ -103,6 +119,14 @@ impl Studio {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+}
+
+impl Studio {
+    /// Whether the studio's process still runs (not ended, not a zombie).
+    fn child_alive(&self) -> bool {
+        std::fs::read_to_string(format!("/proc/{}/stat", self.child.id()))
+            .is_ok_and(|stat| stat.rsplit_once(')').and_then(|(_, rest)| rest.split_whitespace().next()).is_some_and(|state| state != "Z"))
     }
 }
 
@@ -438,4 +462,96 @@ fn a_cancelled_job_leaves_nothing_and_sigterm_ends_the_studio_within_seconds() {
     let mut names = names;
     names.sort();
     assert_eq!(names, ["variant_000", "variant_001"], "the studio wrote into the run");
+}
+
+/// The status of the answer on `c`, if one arrives before the connection ends.
+fn read_status(c: &mut std::net::TcpStream) -> Option<u16> {
+    c.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    let mut line = String::new();
+    BufReader::new(c).read_line(&mut line).ok()?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// The studio's resident memory, KiB.
+fn rss_kib(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    status.lines().find_map(|l| l.strip_prefix("VmRSS:")).and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok()).unwrap()
+}
+
+/// What anyone on the machine can send, without the token, crashes,
+/// freezes or slows nothing: a false huge Content-Length (tiny_http
+/// allocated it and aborted), 300 idle connections and 8 that send a head
+/// and no body (8 handler threads froze), a 1 MB header line (memory grew
+/// by its size). After each, the state answers within a second.
+#[test]
+fn the_studio_survives_what_anyone_on_the_machine_can_send() {
+    use std::io::Write;
+    use std::net::TcpStream;
+    let s = Studio::start();
+    let authority = s.base.strip_prefix("http://").unwrap().to_string();
+    let answers_fast = |after: &str| {
+        let t = Instant::now();
+        let (status, _) = s.get("/api/state");
+        assert_eq!(status, 200, "after {after}");
+        assert!(t.elapsed() < Duration::from_secs(1), "after {after}: {:.2} s", t.elapsed().as_secs_f64());
+    };
+    for token in ["", s.token.as_str()] {
+        let mut c = TcpStream::connect(&authority).unwrap();
+        let t = if token.is_empty() { String::new() } else { format!("X-Studio-Token: {token}\r\n") };
+        write!(c, "POST /api/drafts HTTP/1.1\r\nHost: {authority}\r\n{t}Content-Type: application/json\r\nContent-Length: 999999999999999\r\n\r\n").unwrap();
+        assert_eq!(read_status(&mut c), Some(if token.is_empty() { 403 } else { 413 }));
+    }
+    assert!(s.child_alive(), "a false Content-Length ended the studio");
+    answers_fast("a false huge Content-Length");
+
+    let idle: Vec<TcpStream> = (0..300).map(|_| TcpStream::connect(&authority).unwrap()).collect();
+    let stalled: Vec<TcpStream> = (0..8)
+        .map(|_| {
+            let mut c = TcpStream::connect(&authority).unwrap();
+            write!(c, "POST /api/drafts HTTP/1.1\r\nHost: {authority}\r\nX-Studio-Token: {}\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n", s.token).unwrap();
+            c
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    answers_fast("300 idle connections and 8 bodies that never come");
+    drop((idle, stalled));
+
+    let before = rss_kib(s.child.id());
+    let mut c = TcpStream::connect(&authority).unwrap();
+    c.set_write_timeout(Some(Duration::from_secs(10))).unwrap();
+    let line = format!("GET /api/state HTTP/1.1\r\nHost: {authority}\r\nX-Big: {}\r\n\r\n", "a".repeat(1 << 20));
+    // The studio answers before the line ends and closes: the rest of the
+    // write may be refused.
+    let _ = c.write_all(line.as_bytes());
+    let status = read_status(&mut c);
+    assert!(matches!(status, Some(431) | Some(400) | None), "a 1 MB header line: {status:?}");
+    let grown = rss_kib(s.child.id()).saturating_sub(before);
+    assert!(grown < 8 * 1024, "a 1 MB header line grew the studio by {grown} KiB");
+    answers_fast("a 1 MB header line");
+}
+
+/// Out of file descriptors, the studio stops taking connections for a
+/// while, and takes them again when some close (tiny_http's accept thread
+/// ended for good, and the studio refused every connection until killed).
+#[test]
+fn the_studio_takes_connections_again_after_running_out_of_files() {
+    use std::net::TcpStream;
+    let s = Studio::start_with_files(Some(256));
+    let authority = s.base.strip_prefix("http://").unwrap().to_string();
+    // More connections than the studio may hold files: the last ones wait
+    // in the listen queue or are refused.
+    let flood: Vec<TcpStream> = (0..320).filter_map(|_| TcpStream::connect_timeout(&authority.parse().unwrap(), Duration::from_secs(1)).ok()).collect();
+    std::thread::sleep(Duration::from_millis(500));
+    drop(flood);
+    let t = Instant::now();
+    loop {
+        let answered = std::panic::catch_unwind(|| s.get("/api/state").0).ok();
+        if answered == Some(200) {
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(15), "the studio never took connections again ({answered:?})");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(s.child_alive());
+    eprintln!("answering again {:.2} s after the flood closed", t.elapsed().as_secs_f64());
 }

@@ -1,21 +1,31 @@
-//! The studio's local HTTP server (tiny_http): bound to 127.0.0.1, every
-//! request carries the session's token (the `?token=` of the printed URL,
-//! then a cookie the page gets, or an `X-Studio-Token` header), a Host header
-//! other than localhost or 127.0.0.1 is refused (DNS rebinding), and only
-//! the routes below answer: nothing is served by path from the disk, so
+//! The studio's local HTTP server: hyper's HTTP/1.1 on a tokio runtime of
+//! one thread, bound to 127.0.0.1. Limits before any work: a request's head
+//! within [`HEAD_TIMEOUT`] (an idle connection is closed after it too), at
+//! most [`MAX_HEAD`] bytes and [`MAX_HEADERS`] fields (431), a body declared
+//! over [`MAX_BODY`] refused before a byte of it is read (413), a body sent
+//! within [`BODY_TIMEOUT`], at most [`MAX_CONNECTIONS`] open connections
+//! (those past it are closed at once), and an accept loop that waits and goes
+//! on when the process runs out of file descriptors. The routes run on the
+//! runtime's blocking pool ([`HANDLERS`] threads), so a slow one holds no
+//! connection's reading.
+//!
+//! Every request carries the session's token (the `?token=` of the printed
+//! URL, then a cookie the page gets, or an `X-Studio-Token` header), a Host
+//! header other than localhost or 127.0.0.1 is refused (DNS rebinding), and
+//! only the routes below answer: nothing is served by path from the disk, so
 //! nothing outside the run folder can be reached. A request that changes
 //! something is JSON from the studio's own page ([`change_refused`]); every
 //! answer carries a strict Content-Security-Policy. A bad request gets a 4xx
 //! with a one-line message and changes nothing.
 
-use std::io::{Cursor, Read};
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
+use http_body_util::{BodyExt, Full, Limited};
+use hyper::body::Bytes;
+use hyper::{HeaderMap, Method};
 use serde::Serialize;
-use tiny_http::{Header, Method, Request, Response, Server};
 
 use crate::error::{Error, Result};
 
@@ -24,6 +34,18 @@ use super::{EditRequest, JobRequest, Studio};
 
 /// Largest request body read (an edit or a job is a few hundred bytes).
 pub const MAX_BODY: usize = 64 * 1024;
+/// Largest request head (request line and header fields), bytes.
+pub const MAX_HEAD: usize = 16 * 1024;
+/// Most header fields in a request.
+pub const MAX_HEADERS: usize = 64;
+/// A request's head arrives within this, or the connection is closed (an
+/// idle kept-alive connection too).
+pub const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
+/// A request's body arrives within this (408 otherwise).
+pub const BODY_TIMEOUT: Duration = Duration::from_secs(10);
+/// Open connections at most (a browser opens six); one past it is closed
+/// as soon as it is accepted.
+pub const MAX_CONNECTIONS: usize = 1024;
 /// Threads answering requests (jobs run on the studio's worker, so these
 /// stay free while one runs).
 pub const HANDLERS: usize = 8;
@@ -40,9 +62,8 @@ pub struct ServeOptions {
 pub struct Served {
     pub port: u16,
     pub token: String,
-    server: Arc<Server>,
-    stop: Arc<AtomicBool>,
-    handlers: Vec<std::thread::JoinHandle<()>>,
+    stop: tokio::sync::watch::Sender<bool>,
+    server: std::thread::JoinHandle<()>,
 }
 
 impl Served {
@@ -51,49 +72,132 @@ impl Served {
         format!("http://127.0.0.1:{}/?token={}", self.port, self.token)
     }
 
-    /// Stops answering: the handler threads end after the request they are on.
+    /// Stops answering: no new connection is taken, and the requests being
+    /// answered get a second to end.
     pub fn stop(self) {
-        self.stop.store(true, Ordering::SeqCst);
-        self.server.unblock();
-        for h in self.handlers {
-            let _ = h.join();
-        }
+        let _ = self.stop.send(true);
+        let _ = self.server.join();
     }
 }
 
-/// Binds 127.0.0.1:`port` and answers requests for `studio` on
-/// [`HANDLERS`] threads until [`Served::stop`].
+/// What every connection shares.
+struct Shared {
+    studio: Arc<Studio>,
+    token: String,
+    port: u16,
+}
+
+/// Binds 127.0.0.1:`port` and answers requests for `studio` until
+/// [`Served::stop`].
 pub fn serve(studio: Arc<Studio>, options: ServeOptions) -> Result<Served> {
-    let server = Server::http(("127.0.0.1", options.port))
+    let listener = std::net::TcpListener::bind(("127.0.0.1", options.port))
         .map_err(|e| Error::Usage(format!("cannot listen on 127.0.0.1:{}: {e}", options.port)))?;
-    let port = server.server_addr().to_ip().map(|a| a.port()).unwrap_or(options.port);
+    let port = listener.local_addr().map(|a| a.port()).unwrap_or(options.port);
+    listener.set_nonblocking(true).map_err(|e| Error::Invalid(format!("studio server: {e}")))?;
     let token = match options.token {
         Some(t) => t,
         None => new_token()?,
     };
-    let server = Arc::new(server);
-    let stop = Arc::new(AtomicBool::new(false));
-    let handlers = (0..HANDLERS)
-        .map(|k| {
-            let (server, stop, studio, token) = (server.clone(), stop.clone(), studio.clone(), token.clone());
-            std::thread::Builder::new()
-                .name(format!("studio-http-{k}"))
-                .spawn(move || {
-                    while !stop.load(Ordering::SeqCst) {
-                        match server.recv_timeout(Duration::from_millis(250)) {
-                            // A bug answering one request drops that request, not the thread.
-                            Ok(Some(request)) => {
-                                let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| answer(&studio, &token, port, request)));
-                            }
-                            Ok(None) => {}
-                            Err(_) => break,
-                        }
-                    }
-                })
-                .expect("a thread starts")
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .max_blocking_threads(HANDLERS)
+        .thread_name("studio-http")
+        .build()
+        .map_err(|e| Error::Invalid(format!("studio server: {e}")))?;
+    let listener = {
+        let _inside = runtime.enter();
+        tokio::net::TcpListener::from_std(listener).map_err(|e| Error::Invalid(format!("studio server: {e}")))?
+    };
+    let shared = Arc::new(Shared { studio, token: token.clone(), port });
+    let (stop, stopped) = tokio::sync::watch::channel(false);
+    let server = std::thread::Builder::new()
+        .name("studio-http".into())
+        .spawn(move || {
+            runtime.block_on(accept_loop(listener, shared, stopped));
+            // Requests being answered get a second; the process is ending.
+            runtime.shutdown_timeout(Duration::from_secs(1));
         })
-        .collect();
-    Ok(Served { port, token, server, stop, handlers })
+        .map_err(|e| Error::Invalid(format!("studio server: {e}")))?;
+    Ok(Served { port, token, stop, server })
+}
+
+/// Takes connections until told to stop. Accepting fails when the process
+/// is out of file descriptors (EMFILE) or the system is (ENFILE): it waits
+/// a little and goes on, while idle connections time out and free theirs.
+async fn accept_loop(listener: tokio::net::TcpListener, shared: Arc<Shared>, mut stop: tokio::sync::watch::Receiver<bool>) {
+    let open = Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
+    loop {
+        let accepted = tokio::select! {
+            _ = stop.changed() => return,
+            a = listener.accept() => a,
+        };
+        match accepted {
+            Ok((stream, _)) => {
+                let Ok(permit) = open.clone().try_acquire_owned() else { continue };
+                let shared = shared.clone();
+                tokio::spawn(async move {
+                    serve_connection(stream, shared).await;
+                    drop(permit);
+                });
+            }
+            Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
+        }
+    }
+}
+
+async fn serve_connection(stream: tokio::net::TcpStream, shared: Arc<Shared>) {
+    let _ = stream.set_nodelay(true);
+    let service = hyper::service::service_fn(move |request| {
+        let shared = shared.clone();
+        async move { Ok::<_, std::convert::Infallible>(handle(request, shared).await) }
+    });
+    let connection = hyper::server::conn::http1::Builder::new()
+        .timer(hyper_util::rt::TokioTimer::new())
+        .header_read_timeout(HEAD_TIMEOUT)
+        .max_buf_size(MAX_HEAD.max(8192))
+        .max_headers(MAX_HEADERS)
+        .serve_connection(hyper_util::rt::TokioIo::new(stream), service);
+    let _ = connection.await;
+}
+
+/// What the routes see of a request.
+struct Request {
+    method: Method,
+    /// Path and query.
+    target: String,
+    headers: HeaderMap,
+}
+
+impl Request {
+    fn url(&self) -> &str {
+        &self.target
+    }
+    fn method(&self) -> &Method {
+        &self.method
+    }
+}
+
+async fn handle(request: hyper::Request<hyper::body::Incoming>, shared: Arc<Shared>) -> hyper::Response<Full<Bytes>> {
+    let (parts, body) = request.into_parts();
+    let request = Request {
+        method: parts.method,
+        target: parts.uri.path_and_query().map_or_else(|| "/".to_string(), |p| p.as_str().to_string()),
+        headers: parts.headers,
+    };
+    let reply = match refusal(&shared, &request) {
+        Some(reply) => reply,
+        None => match read_body(body, &request).await {
+            Err(reply) => reply,
+            Ok(body) => {
+                let shared = shared.clone();
+                // A bug answering one request fails that request (500).
+                tokio::task::spawn_blocking(move || route(&shared.studio, &request, &body, &shared.token, shared.port))
+                    .await
+                    .unwrap_or_else(|_| Reply::error(500, "the studio failed answering this request (see its log)"))
+            }
+        },
+    };
+    response(reply)
 }
 
 /// 32 hex digits from the operating system's random source (none, no
@@ -142,7 +246,7 @@ fn from_result(r: Result<Reply>) -> Reply {
 }
 
 fn header<'a>(request: &'a Request, name: &str) -> Option<&'a str> {
-    request.headers().iter().find(|h| h.field.as_str().as_str().eq_ignore_ascii_case(name)).map(|h| h.value.as_str())
+    request.headers.get(name).and_then(|v| v.to_str().ok())
 }
 
 /// Whether the Host header names this machine's loopback (with or without
@@ -187,7 +291,7 @@ fn same(a: &str, b: &str) -> bool {
 /// (`Origin`, which browsers send with every POST), that page must be this
 /// studio's.
 fn change_refused(request: &Request, port: u16) -> Option<&'static str> {
-    if *request.method() != Method::Post {
+    if *request.method() != Method::POST {
         return None;
     }
     let json = header(request, "Content-Type")
@@ -224,51 +328,57 @@ fn content_security_policy() -> &'static str {
     })
 }
 
-fn answer(studio: &Studio, token: &str, port: u16, mut request: Request) {
-    let reply = if !host_allowed(header(&request, "Host"), port) {
-        Reply::error(403, "this studio answers only requests addressed to localhost or 127.0.0.1")
-    } else if !token_of(&request, port).is_some_and(|t| same(&t, token)) {
-        Reply::error(403, "missing or wrong token: open the address the studio printed (with its ?token=)")
-    } else if let Some(why) = change_refused(&request, port) {
-        Reply::error(403, why)
-    } else {
-        let body = read_body(&mut request);
-        match body {
-            Ok(body) => route(studio, &request, &body, token, port),
-            Err(reply) => reply,
-        }
-    };
-    let mut response = Response::new(
-        tiny_http::StatusCode(reply.status),
-        Vec::new(),
-        Cursor::new(reply.body.clone()),
-        Some(reply.body.len()),
-        None,
-    )
-    .with_header(Header::from_bytes("Content-Type", reply.content_type).expect("a valid header"))
-    .with_header(Header::from_bytes("Cache-Control", "no-store").expect("a valid header"))
-    .with_header(Header::from_bytes("X-Content-Type-Options", "nosniff").expect("a valid header"))
-    .with_header(Header::from_bytes("Content-Security-Policy", content_security_policy()).expect("a valid header"))
-    .with_header(Header::from_bytes("Referrer-Policy", "no-referrer").expect("a valid header"));
-    for (k, v) in &reply.headers {
-        if let Ok(h) = Header::from_bytes(k.as_bytes(), v.as_bytes()) {
-            response = response.with_header(h);
-        }
+/// Why a request is refused before its body is read, if it is: not
+/// addressed to this machine, without the token, a change not from the
+/// studio's page, a body declared too large.
+fn refusal(shared: &Shared, request: &Request) -> Option<Reply> {
+    let port = shared.port;
+    if !host_allowed(header(request, "Host"), port) {
+        return Some(Reply::error(403, "this studio answers only requests addressed to localhost or 127.0.0.1"));
     }
-    let _ = request.respond(response);
+    if !token_of(request, port).is_some_and(|t| same(&t, &shared.token)) {
+        return Some(Reply::error(403, "missing or wrong token: open the address the studio printed (with its ?token=)"));
+    }
+    if let Some(why) = change_refused(request, port) {
+        return Some(Reply::error(403, why));
+    }
+    let declared = header(request, "Content-Length").map(|n| n.trim().parse::<u64>());
+    match declared {
+        Some(Err(_)) => Some(Reply::error(400, "Content-Length is not a number")),
+        Some(Ok(n)) if n > MAX_BODY as u64 => Some(Reply::error(413, &format!("request body over {MAX_BODY} bytes"))),
+        _ => None,
+    }
 }
 
-fn read_body(request: &mut Request) -> std::result::Result<Vec<u8>, Reply> {
-    if request.body_length().is_some_and(|n| n > MAX_BODY) {
-        return Err(Reply::error(413, &format!("request body over {MAX_BODY} bytes")));
+/// The body, at most [`MAX_BODY`] bytes, within [`BODY_TIMEOUT`].
+async fn read_body(body: hyper::body::Incoming, request: &Request) -> std::result::Result<Vec<u8>, Reply> {
+    if *request.method() == Method::GET {
+        return Ok(Vec::new());
     }
-    let mut body = Vec::new();
-    let read = request.as_reader().take(MAX_BODY as u64 + 1).read_to_end(&mut body);
-    match read {
-        Err(e) => Err(Reply::error(400, &format!("cannot read the request body: {e}"))),
-        Ok(_) if body.len() > MAX_BODY => Err(Reply::error(413, &format!("request body over {MAX_BODY} bytes"))),
-        Ok(_) => Ok(body),
+    match tokio::time::timeout(BODY_TIMEOUT, Limited::new(body, MAX_BODY).collect()).await {
+        Err(_) => Err(Reply::error(408, &format!("the request body did not arrive within {} s", BODY_TIMEOUT.as_secs()))),
+        Ok(Err(e)) if e.is::<http_body_util::LengthLimitError>() => Err(Reply::error(413, &format!("request body over {MAX_BODY} bytes"))),
+        Ok(Err(e)) => Err(Reply::error(400, &format!("cannot read the request body: {e}"))),
+        Ok(Ok(collected)) => Ok(collected.to_bytes().to_vec()),
     }
+}
+
+fn response(reply: Reply) -> hyper::Response<Full<Bytes>> {
+    let mut builder = hyper::Response::builder()
+        .status(reply.status)
+        .header("Content-Type", reply.content_type)
+        .header("Cache-Control", "no-store")
+        .header("X-Content-Type-Options", "nosniff")
+        .header("Content-Security-Policy", content_security_policy())
+        .header("Referrer-Policy", "no-referrer");
+    for (k, v) in &reply.headers {
+        builder = builder.header(k.as_str(), v.as_str());
+    }
+    builder.body(Full::new(Bytes::from(reply.body))).unwrap_or_else(|_| {
+        let mut r = hyper::Response::new(Full::new(Bytes::from_static(b"{\"error\": \"the answer could not be made\"}")));
+        *r.status_mut() = hyper::StatusCode::INTERNAL_SERVER_ERROR;
+        r
+    })
 }
 
 fn parse<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T> {
@@ -278,8 +388,8 @@ fn parse<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T> {
 fn route(studio: &Studio, request: &Request, body: &[u8], token: &str, port: u16) -> Reply {
     let path = request.url().split('?').next().unwrap_or("/");
     let parts: Vec<&str> = path.trim_matches('/').split('/').filter(|p| !p.is_empty()).collect();
-    let get = *request.method() == Method::Get;
-    let post = *request.method() == Method::Post;
+    let get = *request.method() == Method::GET;
+    let post = *request.method() == Method::POST;
     match (parts.as_slice(), get, post) {
         ([], true, _) | (["index.html"], true, _) => {
             let mut r = Reply::bytes("text/html; charset=utf-8", super::assets::page().as_bytes().to_vec());
