@@ -46,6 +46,11 @@ impl Studio {
         let dir = tempfile::tempdir().unwrap();
         let run = dir.path().join("run");
         copy_dir(tiny_trained_run(), &run);
+        Studio::launch(run, dir, files)
+    }
+
+    /// A studio on `run` (inside `dir`, kept as long as the studio).
+    fn launch(run: PathBuf, dir: tempfile::TempDir, files: Option<u64>) -> Studio {
         let mut command = Command::new(env!("CARGO_BIN_EXE_shapeshifter"));
         command.args(["studio", run.to_str().unwrap(), "--port", "0"]).stdout(Stdio::piped()).stderr(Stdio::null());
         if let Some(n) = files {
@@ -554,4 +559,52 @@ fn the_studio_takes_connections_again_after_running_out_of_files() {
     }
     assert!(s.child_alive());
     eprintln!("answering again {:.2} s after the flood closed", t.elapsed().as_secs_f64());
+}
+
+/// Keeping is finished by a job (mesh, USD asset, eval.json), and a kept
+/// variant is marked finished last (`stage_kept.json`): a studio stopped
+/// while finishing ends within 2 s, and the next studio on the run finishes
+/// what was missing.
+#[test]
+fn a_stop_while_finishing_a_keep_is_finished_when_the_run_reopens() {
+    let s = Studio::start();
+    let (status, job) = s.post("/api/jobs", json!({"kind": "sample", "n": 1, "seed": 3}));
+    assert_eq!(status, 202, "{job}");
+    let job = s.finish(job["id"].as_str().unwrap());
+    assert_eq!(job["state"], "done", "{job}");
+    let shape = job["outputs"][0].as_str().unwrap().to_string();
+    let (status, job) = s.post("/api/jobs", json!({"kind": "keep", "shape": shape}));
+    assert_eq!(status, 202, "{job}");
+    s.finish(job["id"].as_str().unwrap());
+    // Stopped once finishing has begun (past its meshing, where there is
+    // time to: the USD asset and the evaluation).
+    let t = Instant::now();
+    loop {
+        let (_, state) = s.get("/api/state");
+        let finishing = state["jobs"].as_array().unwrap().iter().find(|j| j["kind"] == "finish").cloned();
+        let message = finishing.as_ref().and_then(|j| j["message"].as_str()).unwrap_or("").to_string();
+        if message.contains("USD") || message.contains("evaluating") {
+            break;
+        }
+        assert!(finishing.is_none_or(|j| j["state"] != "done"), "finishing ended before it could be stopped");
+        assert!(t.elapsed() < Duration::from_secs(120), "finishing never began: {state}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let (code, took, run, dir) = s.signal(libc::SIGTERM, Duration::from_secs(10));
+    assert_eq!(code, Some(143));
+    assert!(took < Duration::from_secs(2), "SIGTERM while finishing took {took:?}");
+    let kept = run.join("variants/variant_002");
+    assert!(kept.join("studio.json").is_file() && !kept.join("stage_kept.json").exists(), "the stop came after finishing");
+    // The next studio on the run finishes it.
+    let s = Studio::launch(run.clone(), dir, None);
+    let t = Instant::now();
+    while !kept.join("stage_kept.json").is_file() {
+        assert!(t.elapsed() < Duration::from_secs(120), "the reopened studio did not finish the kept variant: {}", s.get("/api/state").1["jobs"]);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let usd = std::fs::read_to_string(run.join("variants.usda")).unwrap();
+    assert!(usd.contains("variant_002"), "the kept variant is not in the USD asset");
+    let eval: Value = serde_json::from_slice(&std::fs::read(run.join("eval.json")).unwrap()).unwrap();
+    assert_eq!(eval["variants"].as_array().unwrap().len(), 3, "the kept variant is not in eval.json");
+    assert!(kept.join("mesh.ply").is_file());
 }

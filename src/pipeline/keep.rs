@@ -7,8 +7,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::layout::{variant_dir, variant_name, KEPT_RECORD, MESH_PLY};
-use super::stamp::{mark_done, StampOf};
+use super::layout::{variant_dir, variant_name, KEPT_RECORD};
+use super::stamp::{mark_done, stamp_path, StampOf};
 use super::RunPaths;
 use crate::config::Config;
 use crate::error::{Error, Result};
@@ -73,12 +73,12 @@ pub fn write_kept(paths: &RunPaths, config: &Config, kept: &KeptVariant) -> Resu
 }
 
 /// The kept variant folders (with a [`KEPT_RECORD`]) whose later stages
-/// have not run yet (no mesh).
+/// are not all done yet: no stamp says it is in the USD asset and eval.json.
 pub fn unfinished_kept(paths: &RunPaths) -> Vec<usize> {
     (0..next_index(paths))
         .filter(|&i| {
             let d = variant_dir(&paths.variants(), i);
-            d.join(KEPT_RECORD).is_file() && !d.join(MESH_PLY).is_file()
+            d.join(KEPT_RECORD).is_file() && !stamp_path(&d, StampOf::Kept).is_file()
         })
         .collect()
 }
@@ -90,14 +90,25 @@ pub fn unfinished_kept(paths: &RunPaths) -> Vec<usize> {
 pub fn finish_kept(paths: &RunPaths, config: &Config, progress: &mut dyn FnMut(&str)) -> Result<()> {
     let t = Instant::now();
     let count = next_index(paths);
-    for i in unfinished_kept(paths) {
+    let unfinished = unfinished_kept(paths);
+    // A stop (SIGINT, SIGTERM, a cancel) is taken between steps; each step
+    // writes whole files, and the kept variants' stamps come last, so the
+    // next opening of the run does what is missing.
+    for &i in &unfinished {
+        crate::util::interrupt::check()?;
         progress(&format!("meshing {}", variant_name(i)));
         super::run_mesh(paths, i..i + 1, &config.mesh)?;
     }
+    crate::util::interrupt::check()?;
     progress("writing the USD asset");
     super::run_usd(paths, Some(count), config.output.meters_per_unit, config.output.usd_format)?;
+    crate::util::interrupt::check()?;
     progress(&format!("evaluating the {count} variants"));
     super::run_eval(paths, count)?;
+    crate::util::interrupt::check()?;
+    for &i in &unfinished {
+        mark_done(&variant_dir(&paths.variants(), i), StampOf::Kept, "in the run's USD asset and eval.json", t.elapsed().as_secs_f64())?;
+    }
     log::info!("the run's mesh, USD asset and evaluation updated for its {count} variants in {:.1} s", t.elapsed().as_secs_f64());
     Ok(())
 }

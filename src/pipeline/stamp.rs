@@ -21,6 +21,9 @@ pub enum StampOf {
     Sample,
     Mesh,
     Usd,
+    /// A kept variant (the studio's keep) is in the run's USD asset and
+    /// eval.json: written last, after both.
+    Kept,
 }
 
 impl StampOf {
@@ -32,6 +35,7 @@ impl StampOf {
             StampOf::Sample => "sample".into(),
             StampOf::Mesh => "mesh".into(),
             StampOf::Usd => "usd".into(),
+            StampOf::Kept => "kept".into(),
         };
         format!("stage_{name}.json")
     }
