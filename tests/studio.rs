@@ -244,6 +244,19 @@ fn the_studio_answers_only_its_token_and_loopback_and_refuses_bad_requests_with_
     assert_eq!(state["drafts"][0]["voxels"].as_u64(), Some(voxels_before), "refused edits changed the draft");
     assert_eq!(state["drafts"][0]["edits"], json!([]));
     assert_eq!(state["jobs"], json!([]), "a refused job was queued");
+    // A delete mirrored across x: both sides in one step, one undo.
+    let (status, v) = s.post("/api/drafts/d1/edit", json!({"op": "delete", "box": {"min": [0, 0, 0], "max": [9, 31, 31]}, "mirror": "x"}));
+    assert_eq!(status, 200, "{v}");
+    assert!(v["did"].as_str().unwrap().contains("mirror image across x"), "{v}");
+    let v_mirrored = v["draft"]["voxels"].as_u64().unwrap();
+    let (_, plain) = s.post("/api/drafts/d1/edit", json!({"op": "undo"}));
+    assert_eq!(plain["draft"]["voxels"].as_u64(), Some(voxels_before), "one undo step undoes both sides");
+    let (status, v) = s.post("/api/drafts/d1/edit", json!({"op": "delete", "box": {"min": [0, 0, 0], "max": [9, 31, 31]}, "mirror": "w"}));
+    assert_eq!(status, 400, "an unknown mirror axis: {v}");
+    let (_, one_side) = s.post("/api/drafts/d1/edit", json!({"op": "delete", "box": {"min": [0, 0, 0], "max": [9, 31, 31]}}));
+    assert!(v_mirrored < one_side["draft"]["voxels"].as_u64().unwrap(), "the mirrored delete removed no more than one side: {one_side}");
+    let (_, undone) = s.post("/api/drafts/d1/edit", json!({"op": "undo"}));
+    assert_eq!(undone["draft"]["voxels"].as_u64(), Some(voxels_before));
     let (status, _) = s.get("/api/shapes/variant_000/levels/7/points");
     assert_eq!(status, 400);
     assert_eq!(s.request("DELETE", state_path, None, &[("X-Studio-Token", &s.token)]).0, 405);

@@ -24,8 +24,12 @@ pub const MAX_DRAFTS: usize = 16;
 #[derive(Clone, Debug, Deserialize)]
 #[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
 pub enum EditRequest {
-    /// Remove the voxels inside the box.
-    Delete { r#box: BoxRequest },
+    /// Remove the voxels inside the box (and inside its mirror image).
+    Delete {
+        r#box: BoxRequest,
+        #[serde(default)]
+        mirror: Option<MirrorAxis>,
+    },
     /// Put the voxels inside the box on the clipboard.
     Copy { r#box: BoxRequest },
     /// Put the voxels inside the box of the exemplar's level of the same
@@ -33,10 +37,63 @@ pub enum EditRequest {
     CopyExemplar { r#box: BoxRequest },
     /// Paste the clipboard so that its box's minimum corner lands on `to`.
     Paste { to: [i32; 3] },
-    /// Move the voxels inside the box by `by` voxels.
-    Move { r#box: BoxRequest, by: [i32; 3] },
+    /// Move the voxels inside the box by `by` voxels (and those inside its
+    /// mirror image by the mirrored shift).
+    Move {
+        r#box: BoxRequest,
+        by: [i32; 3],
+        #[serde(default)]
+        mirror: Option<MirrorAxis>,
+    },
     Undo,
     Redo,
+}
+
+/// The axis across which an edit is mirrored, through the middle of the
+/// level's occupied voxels along it (the shape's centre): an edit on one
+/// side of a symmetric building is made on the other side too, as one undo
+/// step.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MirrorAxis {
+    X,
+    Y,
+    Z,
+}
+
+impl MirrorAxis {
+    fn index(self) -> usize {
+        match self {
+            MirrorAxis::X => 0,
+            MirrorAxis::Y => 1,
+            MirrorAxis::Z => 2,
+        }
+    }
+
+    /// `b`'s mirror image across the middle of `level`'s occupied voxels
+    /// along this axis, clipped to the grid (None: nothing of it is in the
+    /// grid, or the level is empty).
+    fn image(self, b: VoxelBox, level: &Level) -> Option<VoxelBox> {
+        let a = self.index();
+        let (lo, hi) = level.coords.iter().fold((i32::MAX, i32::MIN), |(lo, hi), c| (lo.min(c[a]), hi.max(c[a])));
+        if lo > hi {
+            return None;
+        }
+        // Twice the plane's coordinate: voxel x goes to (lo + hi) - x.
+        let twice = lo + hi;
+        let (mut min, mut max) = (b.min, b.max);
+        min[a] = (twice - b.max[a]).max(0);
+        max[a] = (twice - b.min[a]).min(level.resolution as i32 - 1);
+        (min[a] <= max[a]).then_some(VoxelBox { min, max })
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            MirrorAxis::X => "x",
+            MirrorAxis::Y => "y",
+            MirrorAxis::Z => "z",
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, Deserialize)]
@@ -166,13 +223,37 @@ impl Draft {
         }
         let mut next = self.level().clone();
         let what = match *edit {
-            EditRequest::Delete { r#box } => {
+            EditRequest::Delete { r#box, mirror } => {
                 let b = r#box.inside(res)?;
-                format!("deleted {} voxels in {:?}..{:?}", delete_box(&mut next, b)?, b.min.to_array(), b.max.to_array())
+                let mut n = delete_box(&mut next, b)?;
+                let mut said = format!("deleted {{}} voxels in {:?}..{:?}", b.min.to_array(), b.max.to_array());
+                if let Some(axis) = mirror {
+                    // The image may hold nothing (already deleted, or empty there).
+                    if let Some(m) = axis.image(b, self.level()).filter(|&m| m != b) {
+                        n += delete_box(&mut next, m).unwrap_or(0);
+                    }
+                    said.push_str(&format!(" and its mirror image across {}", axis.name()));
+                }
+                said.replacen("{}", &n.to_string(), 1)
             }
-            EditRequest::Move { r#box, by } => {
+            EditRequest::Move { r#box, by, mirror } => {
                 let b = r#box.inside(res)?;
-                format!("moved {} voxels by {by:?}", move_box(&mut next, b, IVec3::from_array(by))?)
+                let mut n = move_box(&mut next, b, IVec3::from_array(by))?;
+                let mut said = format!("moved {{}} voxels by {by:?}");
+                if let Some(axis) = mirror {
+                    if let Some(m) = axis.image(b, self.level()).filter(|&m| m != b) {
+                        let mut mirrored = by;
+                        mirrored[axis.index()] = -by[axis.index()];
+                        // Left as the first move made it where the image would leave the grid.
+                        let mut both = next.clone();
+                        if let Ok(k) = move_box(&mut both, m, IVec3::from_array(mirrored)) {
+                            next = both;
+                            n += k;
+                        }
+                    }
+                    said.push_str(&format!(" and its mirror image across {}", axis.name()));
+                }
+                said.replacen("{}", &n.to_string(), 1)
             }
             EditRequest::Paste { to } => {
                 let clip = clipboard.as_ref().ok_or_else(|| Error::Invalid("the clipboard is empty: copy a box first".into()))?;
@@ -223,7 +304,7 @@ mod tests {
     fn edits_undo_and_redo_and_a_new_edit_forgets_the_undone() {
         let mut d = Draft::new("d1".into(), "variant_000".into(), None, slab());
         let mut clip = None;
-        d.apply(&EditRequest::Delete { r#box: bx([0, 0, 0], [1, 7, 7]) }, &mut clip, None).unwrap();
+        d.apply(&EditRequest::Delete { mirror: None, r#box: bx([0, 0, 0], [1, 7, 7]) }, &mut clip, None).unwrap();
         assert_eq!(d.level().len(), 8);
         d.apply(&EditRequest::Copy { r#box: bx([2, 2, 0], [3, 2, 3]) }, &mut clip, None).unwrap();
         assert_eq!(d.summary().edits.len(), 1, "a copy changes nothing");
@@ -237,7 +318,7 @@ mod tests {
         d.apply(&EditRequest::Undo, &mut clip, None).unwrap();
         assert_eq!(d.level().len(), 16, "back to the source");
         assert!(d.apply(&EditRequest::Undo, &mut clip, None).is_err());
-        d.apply(&EditRequest::Move { r#box: bx([0, 2, 0], [0, 2, 3]), by: [0, 1, 0] }, &mut clip, None).unwrap();
+        d.apply(&EditRequest::Move { mirror: None, r#box: bx([0, 2, 0], [0, 2, 3]), by: [0, 1, 0] }, &mut clip, None).unwrap();
         assert!(!d.summary().can_redo, "the undone edits are forgotten");
         assert_eq!(d.level().coords.iter().filter(|c| c.y == 3).count(), 4);
     }
@@ -247,10 +328,10 @@ mod tests {
         let mut d = Draft::new("d1".into(), "s1".into(), None, slab());
         let mut clip = None;
         for bad in [
-            EditRequest::Delete { r#box: bx([0, 0, 0], [8, 1, 1]) },
-            EditRequest::Delete { r#box: bx([5, 5, 5], [6, 6, 6]) },
+            EditRequest::Delete { mirror: None, r#box: bx([0, 0, 0], [8, 1, 1]) },
+            EditRequest::Delete { mirror: None, r#box: bx([5, 5, 5], [6, 6, 6]) },
             EditRequest::Paste { to: [0, 0, 0] },
-            EditRequest::Move { r#box: bx([0, 2, 0], [3, 2, 3]), by: [0, 6, 0] },
+            EditRequest::Move { mirror: None, r#box: bx([0, 2, 0], [3, 2, 3]), by: [0, 6, 0] },
             EditRequest::CopyExemplar { r#box: bx([0, 0, 0], [1, 1, 1]) },
             EditRequest::Redo,
         ] {
@@ -258,8 +339,36 @@ mod tests {
             assert_eq!(d.level().len(), 16);
             assert!(!d.summary().can_undo);
         }
-        let e = d.apply(&EditRequest::Delete { r#box: bx([-1, 0, 0], [1, 1, 1]) }, &mut clip, None).unwrap_err().to_string();
+        let e = d.apply(&EditRequest::Delete { mirror: None, r#box: bx([-1, 0, 0], [1, 1, 1]) }, &mut clip, None).unwrap_err().to_string();
         assert!(e.contains("outside the level's grid (0..7"), "{e}");
+    }
+
+    #[test]
+    fn a_mirrored_delete_removes_both_sides_in_one_undo_step() {
+        // A row of voxels x = 1..=6 at y = z = 0: the middle is at x = 3.5.
+        let mut level = Level { index: 1, resolution: 8, ..Default::default() };
+        let donor = slab();
+        for x in 1..=6 {
+            level.push_row(&donor, 0, IVec3::new(x, 0, 0));
+        }
+        let mut d = Draft::new("d1".into(), "s1".into(), None, level);
+        let mut clip = None;
+        let what = d.apply(&EditRequest::Delete { r#box: bx([1, 0, 0], [2, 0, 0]), mirror: Some(MirrorAxis::X) }, &mut clip, None).unwrap();
+        let mut left: Vec<i32> = d.level().coords.iter().map(|c| c.x).collect();
+        left.sort();
+        assert_eq!(left, vec![3, 4], "{what}");
+        assert!(what.starts_with("deleted 4 voxels"), "{what}");
+        d.apply(&EditRequest::Undo, &mut clip, None).unwrap();
+        assert_eq!(d.level().len(), 6, "one undo step brings back both sides");
+        // A box across the middle is its own image: deleted once.
+        let what = d.apply(&EditRequest::Delete { r#box: bx([3, 0, 0], [4, 0, 0]), mirror: Some(MirrorAxis::X) }, &mut clip, None).unwrap();
+        assert!(what.starts_with("deleted 2 voxels"), "{what}");
+        // Moving up on the left moves up on the right, mirrored across x.
+        d.apply(&EditRequest::Undo, &mut clip, None).unwrap();
+        d.apply(&EditRequest::Move { r#box: bx([1, 0, 0], [1, 0, 0]), by: [-1, 1, 0], mirror: Some(MirrorAxis::X) }, &mut clip, None).unwrap();
+        let mut moved: Vec<[i32; 3]> = d.level().coords.iter().map(|c| c.to_array()).filter(|c| c[1] == 1).collect();
+        moved.sort();
+        assert_eq!(moved, vec![[0, 1, 0], [7, 1, 0]]);
     }
 
     #[test]

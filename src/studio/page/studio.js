@@ -291,7 +291,9 @@ async function edit(body) {
   await show(S.draft.id, S.draft.level);
 }
 const needBox = () => { const b = boxFromFields(); if (!b) say('select a box first (shift+drag, or type its corners)', true); return b; };
-$('op-delete').onclick = () => { const b = needBox(); if (b) edit({ op: 'delete', box: b }); };
+// The mirror plane (off, x or z) goes with every delete and move.
+const mirrored = (e) => ($('mirror').value ? { ...e, mirror: $('mirror').value } : e);
+$('op-delete').onclick = () => { const b = needBox(); if (b) edit(mirrored({ op: 'delete', box: b })); };
 $('op-copy').onclick = () => { const b = needBox(); if (b) edit({ op: 'copy', box: b }); };
 $('op-copy-exemplar').onclick = () => { const b = needBox(); if (b) edit({ op: 'copy_exemplar', box: b }); };
 $('op-paste').onclick = () => { const b = needBox(); if (b) edit({ op: 'paste', to: b.min }); };
@@ -301,7 +303,7 @@ $('op-move').onclick = () => {
   moveVoxels(b, by);
 };
 async function moveVoxels(b, by) {
-  await edit({ op: 'move', box: b, by });
+  await edit(mirrored({ op: 'move', box: b, by }));
   setBox({ min: b.min.map((m, i) => m + by[i]), max: b.max.map((m, i) => m + by[i]) });
 }
 $('op-undo').onclick = () => edit({ op: 'undo' });
@@ -352,7 +354,7 @@ document.addEventListener('keydown', (ev) => {
     const by = S.state.up === 'z' ? [step[0], -step[2], step[1]] : step;
     if (ev.shiftKey) moveVoxels(b, by);
     else setBox({ min: b.min.map((m, i) => m + by[i]), max: b.max.map((m, i) => m + by[i]) });
-  } else if ((ev.key === 'Delete' || ev.key === 'Backspace') && b) { ev.preventDefault(); edit({ op: 'delete', box: b }); }
+  } else if ((ev.key === 'Delete' || ev.key === 'Backspace') && b) { ev.preventDefault(); edit(mirrored({ op: 'delete', box: b })); }
   else if (ev.ctrlKey && ev.key === 'c' && b) { ev.preventDefault(); edit({ op: 'copy', box: b }); }
   else if (ev.ctrlKey && ev.key === 'v' && b) { ev.preventDefault(); edit({ op: 'paste', to: b.min }); }
   else if (ev.ctrlKey && (ev.key === 'y' || (ev.key === 'Z' && ev.shiftKey) || (ev.key === 'z' && ev.shiftKey))) { ev.preventDefault(); edit({ op: 'redo' }); }
