@@ -586,6 +586,10 @@ fn a_stop_while_finishing_a_keep_is_finished_when_the_run_reopens() {
     let job = s.finish(job["id"].as_str().unwrap());
     assert_eq!(job["state"], "done", "{job}");
     let shape = job["outputs"][0].as_str().unwrap().to_string();
+    // A draft left open, with an edit: the next studio on the run reopens it.
+    let (_, draft) = s.post("/api/drafts", json!({"source": "variant_001", "level": 1}));
+    let (status, edited) = s.post(&format!("/api/drafts/{}/edit", draft["id"].as_str().unwrap()), json!({"op": "delete", "box": {"min": [0, 0, 0], "max": [12, 31, 31]}}));
+    assert_eq!(status, 200, "{edited}");
     let (status, job) = s.post("/api/jobs", json!({"kind": "keep", "shape": shape}));
     assert_eq!(status, 202, "{job}");
     s.finish(job["id"].as_str().unwrap());
@@ -620,4 +624,14 @@ fn a_stop_while_finishing_a_keep_is_finished_when_the_run_reopens() {
     let eval: Value = serde_json::from_slice(&std::fs::read(run.join("eval.json")).unwrap()).unwrap();
     assert_eq!(eval["variants"].as_array().unwrap().len(), 3, "the kept variant is not in eval.json");
     assert!(kept.join("mesh.ply").is_file());
+    let (_, state) = s.get("/api/state");
+    let reopened = &state["drafts"][0];
+    assert_eq!((&reopened["id"], &reopened["source"], &reopened["voxels"]), (&edited["draft"]["id"], &json!("variant_001"), &edited["draft"]["voxels"]), "{state}");
+    let (_, another) = s.post("/api/drafts", json!({"source": "variant_000", "level": 1}));
+    assert_ne!(another["id"], reopened["id"], "a new draft took a reopened draft's id");
+    let (status, job) = s.post("/api/jobs", json!({"kind": "regenerate", "draft": reopened["id"]}));
+    assert_eq!(status, 202, "a reopened draft regenerates: {job}");
+    assert_eq!(s.finish(job["id"].as_str().unwrap())["state"], "done");
+    s.post(&format!("/api/drafts/{}/discard", reopened["id"].as_str().unwrap()), json!({}));
+    assert!(!run.join(format!("studio_drafts/{}.json", reopened["id"].as_str().unwrap())).exists(), "a discarded draft stays saved");
 }

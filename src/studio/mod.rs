@@ -24,6 +24,7 @@ pub mod assets;
 pub mod drafts;
 pub mod http;
 pub mod jobs;
+pub mod saved;
 pub mod shapes;
 
 use std::path::Path;
@@ -75,6 +76,8 @@ pub struct Studio {
     pub gallery: Gallery,
     drafts: Mutex<Vec<Draft>>,
     draft_ids: Ids,
+    /// What a saved draft's level file records of its making.
+    draft_provenance: crate::io::vdb::Provenance,
     clipboard: Mutex<Option<Clipboard>>,
     pub jobs: Jobs,
     /// Set once the worker has loaded the networks (or failed to).
@@ -141,6 +144,34 @@ impl Studio {
         let eval = read_json(&paths.eval_json());
         let gallery = Gallery::open(&exemplar, &paths.variants(), eval.as_ref())?;
         let jobs = Jobs::new();
+        let draft_provenance = crate::io::vdb::Provenance {
+            exemplar: manifest.exemplar.clone(),
+            seed: None,
+            config_digest: config.digest(),
+            exemplar_open: manifest.open_surface,
+            crs: manifest.crs.clone(),
+        };
+        // Drafts a former studio left open, where they still fit the run's
+        // levels (a coarser level than the finest, at its resolution).
+        let finest = exemplar.len() - 1;
+        let restored: Vec<Draft> = saved::load(&paths)
+            .into_iter()
+            .filter(|d| {
+                let l = d.level();
+                let fits = l.index < finest && exemplar[l.index].resolution == l.resolution;
+                if !fits {
+                    log::warn!("saved draft {}: level {} of {}^3 does not fit this run's levels: left out", d.id, l.index, l.resolution);
+                }
+                fits
+            })
+            .collect();
+        let draft_ids = Ids::new("d");
+        if let Some(last) = restored.iter().filter_map(|d| d.id[1..].parse::<usize>().ok()).max() {
+            draft_ids.continue_after(last);
+        }
+        if !restored.is_empty() {
+            log::info!("{} drafts reopened from {}", restored.len(), saved::DRAFTS_DIR);
+        }
         let studio = Studio {
             paths,
             config,
@@ -154,8 +185,9 @@ impl Studio {
                 Precision::Bf16 => true,
             },
             gallery,
-            drafts: Mutex::new(Vec::new()),
-            draft_ids: Ids::new("d"),
+            drafts: Mutex::new(restored),
+            draft_ids,
+            draft_provenance,
             clipboard: Mutex::new(None),
             jobs,
             ready: AtomicBool::new(false),
@@ -216,6 +248,7 @@ impl Studio {
         }
         let draft = Draft::new(self.draft_ids.next(), source.to_string(), seed, (*l).clone());
         let summary = draft.summary();
+        self.save_draft(&draft);
         drafts.push(draft);
         Ok(summary)
     }
@@ -227,7 +260,17 @@ impl Studio {
         let exemplar_level = self.exemplar.get(d.level().index);
         let mut clipboard = self.clipboard.lock().unwrap_or_else(|e| e.into_inner());
         let what = d.apply(edit, &mut clipboard, exemplar_level)?;
-        Ok((what, d.summary()))
+        let summary = d.summary();
+        self.save_draft(d);
+        Ok((what, summary))
+    }
+
+    /// Saves a draft into the run folder; a failure is logged (the draft
+    /// stays open in this session).
+    fn save_draft(&self, draft: &Draft) {
+        if let Err(e) = saved::save(&self.paths, draft, &self.draft_provenance) {
+            log::warn!("draft {} not saved into the run folder: {e}", draft.id);
+        }
     }
 
     /// The current level of a draft.
@@ -241,6 +284,7 @@ impl Studio {
         let mut drafts = self.lock_drafts();
         let at = drafts.iter().position(|d| d.id == draft).ok_or_else(|| shapes::unknown(draft))?;
         drafts.remove(at);
+        saved::remove(&self.paths, draft);
         Ok(())
     }
 
@@ -348,6 +392,10 @@ pub struct Ids {
 impl Ids {
     pub const fn new(prefix: &'static str) -> Ids {
         Ids { prefix, next: std::sync::atomic::AtomicUsize::new(1) }
+    }
+    /// The next id is numbered after `last` (ids reopened from a run folder).
+    pub fn continue_after(&self, last: usize) {
+        self.next.fetch_max(last + 1, std::sync::atomic::Ordering::SeqCst);
     }
     pub fn next(&self) -> String {
         format!("{}{}", self.prefix, self.next.fetch_add(1, std::sync::atomic::Ordering::SeqCst))
