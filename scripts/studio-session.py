@@ -15,6 +15,12 @@ time and the run's finishing work (mesh, USD, eval), waited for before the next 
 
     scripts/studio-session.py RUN OUT [--bin target/release/shapeshifter]
         [--delete V] [--paste V] [--like V]     (variant numbers; default 7, 2, 4)
+        [--minutes M]
+
+With --minutes M, the session goes on for M minutes more in rounds (a delete at
+level 1 regenerated, one more like a variant, one new variant, the draft discarded,
+the shapes left in the gallery as a person leaves them) and prints the studio's
+resident memory after each round (memory.csv in OUT): what a long session costs.
 
 Standard library only (urllib), so any Python 3 runs it.
 """
@@ -72,6 +78,13 @@ class Studio:
     def shape(self, shape_id):
         return next(s for s in self.get("/api/state")["shapes"] if s["id"] == shape_id)
 
+    def rss_mib(self):
+        """The studio's resident memory, MiB (Linux)."""
+        for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
     def close(self):
         self.proc.terminate()
         self.proc.wait(timeout=60)
@@ -101,6 +114,7 @@ def main():
     ap.add_argument("--delete", type=int, default=7)
     ap.add_argument("--paste", type=int, default=2)
     ap.add_argument("--like", type=int, default=4)
+    ap.add_argument("--minutes", type=float, default=0.0)
     a = ap.parse_args()
     out = Path(a.out)
     if out.exists():
@@ -164,6 +178,25 @@ def main():
         job = s.finish(s.post("/api/jobs", {"kind": "sample", "n": 2, "seed": 21}))
         for new, levels in ready(job).items():
             record(new, "a new variant (seed 21)", levels)
+
+        # 5. The long session: rounds until --minutes pass, memory after each.
+        if a.minutes > 0:
+            memory = [("minutes", "round", "shapes", "rss_mib")]
+            t0, k = time.time(), 0
+            while time.time() - t0 < a.minutes * 60:
+                k += 1
+                src = f"variant_{(a.delete + k) % 10:03d}"
+                d = s.post("/api/drafts", {"source": src, "level": 1})["id"]
+                lo = int(top * (0.4 + 0.05 * (k % 6)))
+                s.post(f"/api/drafts/{d}/edit", {"op": "delete", "box": {"min": [0, lo, 0], "max": [top, top, top]}})
+                s.finish(s.post("/api/jobs", {"kind": "regenerate", "draft": d}))
+                s.post(f"/api/drafts/{d}/discard", {})
+                s.finish(s.post("/api/jobs", {"kind": "more_like", "source": src, "keep_level": 1, "n": 1}))
+                s.finish(s.post("/api/jobs", {"kind": "sample", "n": 1, "seed": 100 + k}))
+                shapes = len(s.get("/api/state")["shapes"])
+                memory.append((f"{(time.time() - t0) / 60:.1f}", k, shapes, f"{s.rss_mib():.0f}"))
+                print("studio-session: " + ", ".join(f"{h} {v}" for h, v in zip(memory[0], memory[-1])), file=sys.stderr)
+            (out / "memory.csv").write_text("\n".join(",".join(map(str, r)) for r in memory) + "\n")
 
     finally:
         s.close()

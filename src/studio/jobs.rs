@@ -267,6 +267,19 @@ impl JobStatus {
     }
 }
 
+/// Gives the memory a job freed back to the system. A job allocates on
+/// many threads (the transfer's and the judge's rayon workers, libtorch's),
+/// and glibc keeps what they free in per-thread arenas: in a session of
+/// 150 shapes made in 12 minutes, the studio grew by 15 MB a shape where
+/// each holds about 4 (its levels).
+fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free pages of glibc's heaps.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 /// The worker: loads the networks, then runs the queued jobs one at a time
 /// until the queue closes.
 pub fn worker(studio: Arc<Studio>) {
@@ -306,6 +319,7 @@ pub fn worker(studio: Arc<Studio>) {
                 .unwrap_or_else(|_| Err(Error::Invalid("internal error: a bug in shapeshifter (the studio's log names where)".into())))
         });
         let seconds = started.elapsed().as_secs_f64();
+        release_freed_memory();
         let (state, message) = match result {
             Ok(msg) => (JobState::Done, msg),
             Err(Error::Cancelled) => (JobState::Cancelled, "cancelled: what it had not finished is dropped".to_string()),
