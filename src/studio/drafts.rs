@@ -96,6 +96,11 @@ impl MirrorAxis {
     }
 }
 
+/// What an edit's message adds when it was mirrored.
+fn mirrored_too(mirror: Option<MirrorAxis>) -> String {
+    mirror.map(|axis| format!(" and its mirror image across {}", axis.name())).unwrap_or_default()
+}
+
 #[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BoxRequest {
@@ -226,34 +231,25 @@ impl Draft {
             EditRequest::Delete { r#box, mirror } => {
                 let b = r#box.inside(res)?;
                 let mut n = delete_box(&mut next, b)?;
-                let mut said = format!("deleted {{}} voxels in {:?}..{:?}", b.min.to_array(), b.max.to_array());
-                if let Some(axis) = mirror {
-                    // The image may hold nothing (already deleted, or empty there).
-                    if let Some(m) = axis.image(b, self.level()).filter(|&m| m != b) {
-                        n += delete_box(&mut next, m).unwrap_or(0);
-                    }
-                    said.push_str(&format!(" and its mirror image across {}", axis.name()));
+                // The image may hold nothing (already deleted, or empty there).
+                if let Some(m) = mirror.and_then(|axis| axis.image(b, self.level())).filter(|&m| m != b) {
+                    n += delete_box(&mut next, m).unwrap_or(0);
                 }
-                said.replacen("{}", &n.to_string(), 1)
+                format!("deleted {n} voxels in {:?}..{:?}{}", b.min.to_array(), b.max.to_array(), mirrored_too(mirror))
             }
             EditRequest::Move { r#box, by, mirror } => {
                 let b = r#box.inside(res)?;
                 let mut n = move_box(&mut next, b, IVec3::from_array(by))?;
-                let mut said = format!("moved {{}} voxels by {by:?}");
                 if let Some(axis) = mirror {
                     if let Some(m) = axis.image(b, self.level()).filter(|&m| m != b) {
                         let mut mirrored = by;
                         mirrored[axis.index()] = -by[axis.index()];
-                        // Left as the first move made it where the image would leave the grid.
-                        let mut both = next.clone();
-                        if let Ok(k) = move_box(&mut both, m, IVec3::from_array(mirrored)) {
-                            next = both;
-                            n += k;
-                        }
+                        // move_box changes nothing where it fails (the image
+                        // would leave the grid): the first move stands alone.
+                        n += move_box(&mut next, m, IVec3::from_array(mirrored)).unwrap_or(0);
                     }
-                    said.push_str(&format!(" and its mirror image across {}", axis.name()));
                 }
-                said.replacen("{}", &n.to_string(), 1)
+                format!("moved {n} voxels by {by:?}{}", mirrored_too(mirror))
             }
             EditRequest::Paste { to } => {
                 let clip = clipboard.as_ref().ok_or_else(|| Error::Invalid("the clipboard is empty: copy a box first".into()))?;

@@ -269,9 +269,9 @@ impl JobStatus {
 
 /// Gives the memory a job freed back to the system. A job allocates on
 /// many threads (the transfer's and the judge's rayon workers, libtorch's),
-/// and glibc keeps what they free in per-thread arenas: in a session of
-/// 150 shapes made in 12 minutes, the studio grew by 15 MB a shape where
-/// each holds about 4 (its levels).
+/// and glibc keeps what they free in per-thread arenas: over a session's
+/// first 60 shapes the studio grew by 23 MiB a shape without this, 10 with
+/// it, where a shape's levels are about 4-5 (docs/studio.md, "Limits").
 fn release_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: malloc_trim only returns free pages of glibc's heaps.

@@ -166,7 +166,7 @@ impl Studio {
             })
             .collect();
         let draft_ids = Ids::new("d");
-        if let Some(last) = restored.iter().filter_map(|d| d.id[1..].parse::<usize>().ok()).max() {
+        if let Some(last) = restored.iter().filter_map(|d| saved::draft_number(&d.id)).max() {
             draft_ids.continue_after(last);
         }
         if !restored.is_empty() {

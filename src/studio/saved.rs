@@ -79,14 +79,19 @@ pub fn load(run: &RunPaths) -> Vec<Draft> {
 fn read(record_file: &Path) -> Result<Draft> {
     let text = std::fs::read_to_string(record_file).map_err(|e| Error::file(record_file, e.to_string()))?;
     let record: Record = serde_json::from_str(&text).map_err(|e| Error::file(record_file, e.to_string()))?;
-    if !record.id.starts_with('d') || record.id[1..].parse::<usize>().is_err() {
+    if draft_number(&record.id).is_none() {
         return Err(Error::file(record_file, format!("'{}' is not a draft id", record.id)));
     }
     let (level, _) = vdb::read_level(&record_file.with_extension("vdb"))?;
     Ok(Draft::new(record.id, record.source, record.seed, level))
 }
 
-/// The number of a draft id (`d12` -> 12), from its record's file name.
+/// The number of a draft id (`d12` -> 12).
+pub fn draft_number(id: &str) -> Option<usize> {
+    id.strip_prefix('d')?.parse().ok()
+}
+
+/// The number of a draft, from its record's file name (oldest first).
 fn id_number(record_file: &Path) -> usize {
-    record_file.file_stem().and_then(|s| s.to_str()).and_then(|s| s.strip_prefix('d')).and_then(|n| n.parse().ok()).unwrap_or(usize::MAX)
+    record_file.file_stem().and_then(|s| s.to_str()).and_then(draft_number).unwrap_or(usize::MAX)
 }
