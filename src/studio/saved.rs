@@ -95,3 +95,47 @@ pub fn draft_number(id: &str) -> Option<usize> {
 fn id_number(record_file: &Path) -> usize {
     record_file.file_stem().and_then(|s| s.to_str()).and_then(draft_number).unwrap_or(usize::MAX)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::level::Level;
+    use glam::{IVec3, Vec3};
+
+    fn level() -> Level {
+        let mut l = Level { index: 1, resolution: 8, ..Default::default() };
+        for x in 0..4 {
+            l.coords.push(IVec3::new(x, 2, 1));
+            l.offsets.push(Vec3::ZERO);
+            l.normals.push(Vec3::Y);
+            l.colours.push(Vec3::splat(0.5));
+            l.mask.push(1.0);
+        }
+        l
+    }
+
+    /// A saved draft reads back as it was; a record that does not parse, one
+    /// whose level file is missing or damaged, or a foreign id is left out,
+    /// and the others still load.
+    #[test]
+    fn saved_drafts_read_back_and_damaged_ones_are_left_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = RunPaths::new(dir.path());
+        let provenance = Provenance { exemplar: "t".into(), seed: None, config_digest: String::new(), exemplar_open: false, crs: None };
+        for id in ["d1", "d2", "d3", "d4"] {
+            save(&run, &Draft::new(id.into(), "variant_000".into(), None, level()), &provenance).unwrap();
+        }
+        let saved = folder(&run);
+        std::fs::write(saved.join("d2.json"), "{not json").unwrap();
+        std::fs::remove_file(saved.join("d3.vdb")).unwrap();
+        std::fs::write(saved.join("d4.vdb"), b"not a vdb file").unwrap();
+        std::fs::write(saved.join("x9.json"), r#"{"id": "x9", "source": "variant_000", "seed": null}"#).unwrap();
+        let loaded = load(&run);
+        let ids: Vec<&str> = loaded.iter().map(|d| d.id.as_str()).collect();
+        assert_eq!(ids, ["d1"]);
+        assert_eq!(loaded[0].level().coords, level().coords);
+        assert_eq!(loaded[0].source, "variant_000");
+        remove(&run, "d1");
+        assert!(!saved.join("d1.json").exists() && !saved.join("d1.vdb").exists());
+    }
+}
